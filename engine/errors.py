@@ -1,0 +1,21 @@
+"""Exceptions that carry a message meant for the user (CLI: one line, service: HTTP 422)."""
+
+
+class VoxelasticError(Exception):
+    """Base class: the message names the offending input and the reason."""
+
+
+class GeometryError(VoxelasticError):
+    """The mesh cannot be read or does not describe a solid (empty, NaN, zero volume...)."""
+
+
+class GridError(VoxelasticError):
+    """The background grid is invalid or too large for the configured memory limit."""
+
+
+class ResultFormatError(VoxelasticError):
+    """A result file is not a voxelastic result or has an unsupported format version."""
+
+
+class MethodUnavailableError(VoxelasticError):
+    """The requested discretization is not implemented in this version."""

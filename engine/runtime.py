@@ -1,0 +1,87 @@
+"""The one place that initialises Taichi.
+
+Kernel modules import ``taichi`` for decorators; only :func:`init` calls ``ti.init``. Importing
+this module does not initialise anything.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+# ti.init otherwise starts a thread that calls out to the internet for a version check.
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+
+import taichi as ti  # noqa: E402
+
+Arch = Literal["cpu", "cuda", "auto"]
+Precision = Literal["f64", "f32"]
+
+
+@dataclass(frozen=True)
+class RuntimeInfo:
+    """What :func:`init` chose: the backend actually running and the float precision."""
+
+    arch: str
+    precision: str
+    cache_dir: str
+
+
+_current: RuntimeInfo | None = None
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("VOXELASTIC_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "voxelastic"
+    )
+    return Path(base) / "taichi"
+
+
+def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path | None = None) -> RuntimeInfo:
+    """Initialise Taichi once per process; later calls with the same settings are no-ops.
+
+    ``auto`` maps to CUDA, which falls back to the CPU cleanly where there is no GPU
+    (``ti.gpu``/OpenGL probing segfaults on GPU-less machines). Asking for different settings
+    after initialisation raises, because fields allocated under the old runtime would dangle.
+    """
+    global _current
+    if arch not in ("cpu", "cuda", "auto"):
+        raise ValueError(f"arch: expected 'cpu', 'cuda' or 'auto', got {arch!r}")
+    if precision not in ("f64", "f32"):
+        raise ValueError(f"precision: expected 'f64' or 'f32', got {precision!r}")
+    if _current is not None:
+        if _current.precision != precision or (arch != "auto" and _current.arch != arch):
+            raise RuntimeError(
+                f"Taichi already initialised with arch={_current.arch}, precision={_current.precision}; "
+                f"cannot switch to arch={arch}, precision={precision} in the same process"
+            )
+        return _current
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    fp = ti.f64 if precision == "f64" else ti.f32
+    ti_arch = ti.cpu if arch == "cpu" else ti.cuda
+    ti.init(
+        arch=ti_arch,
+        default_fp=fp,
+        offline_cache=True,
+        offline_cache_file_path=str(cache),
+        log_level=ti.WARN,
+    )
+    chosen = ti.lang.impl.current_cfg().arch
+    _current = RuntimeInfo(arch="cuda" if chosen == ti.cuda else "cpu", precision=precision, cache_dir=str(cache))
+    return _current
+
+
+def current() -> RuntimeInfo | None:
+    """The runtime chosen by :func:`init`, or None before it ran."""
+    return _current
+
+
+def ensure_initialized() -> RuntimeInfo:
+    """The current runtime, initialising the default (cpu, f64) if nothing ran :func:`init` yet.
+
+    For library use (geometry without a job); jobs call :func:`init` with their settings first.
+    """
+    return _current if _current is not None else init("cpu", "f64")
