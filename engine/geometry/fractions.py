@@ -13,6 +13,7 @@ what is kept is block-sparse (``engine.blocks``): tiles holding material.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,43 +67,28 @@ def control_offsets(dim: int) -> list[tuple[int, ...]]:
 def volume_fractions(surface: Surface, grid: Grid, *, keep_subcells: bool = False) -> VolumeFractions:
     """Exact solid fractions of every control volume (and optionally sub-cell) of ``grid``.
 
-    surface: closed, outward-oriented, same dimension as the grid, inside the grid box.
+    surface: outward-oriented, same dimension as the grid, inside the grid box. Closed surfaces
+    are scan-converted exactly; open ones (``surface.closed`` False) fall back to the
+    generalized winding number, which is approximate and says so in the warnings.
     """
-    from ..runtime import ensure_initialized
-    from . import kernels
-
-    ensure_initialized()
     d = grid.dim
     if surface.dim != d:
         raise GeometryError(f"geometry: a {surface.dim}D surface cannot be placed on a {d}D grid")
-    facets = (surface.vertices[surface.faces] - np.asarray(grid.origin)) / (0.5 * grid.spacing)  # [N, d, d]
-    _check_inside(facets, grid)
-    if d == 3:
-        # vertical triangles have no projected area: they contribute nothing
-        e1, e2 = facets[:, 1, :2] - facets[:, 0, :2], facets[:, 2, :2] - facets[:, 0, :2]
-        facets = facets[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) != 0]
-    lo, hi = facets[:, :, 0].min(axis=1), facets[:, :, 0].max(axis=1)
-    scan = kernels.scan_triangles if d == 3 else kernels.scan_segments
+    tiles = slab_tiles(grid)
+    warnings: list[str] = []
+    if surface.closed:
+        slabs = scan_slabs(surface, grid, tiles)
+    else:
+        from .winding_fill import winding_slabs
 
-    # Tiles must also cover the far faces (index n along a shifted axis), hence n + 1.
-    tiles = [-(-(n + 1) // TILE) for n in grid.shape]
-    sub_cross = tuple(2 * TILE * t for t in tiles[1:])
+        slabs = winding_slabs(surface, grid, tiles, warnings)
+
     offsets = control_offsets(d)
     parts: dict[tuple[int, ...], list] = {s: [] for s in offsets}
     sub_parts: list = []
-    carry = np.zeros((1,) + sub_cross)  # last sub-column of the previous slab
+    carry = np.zeros((1,) + tuple(2 * TILE * t for t in tiles[1:]))  # last sub-column of the previous slab
     extremes = [0.0, 1.0]
-    for tx in range(tiles[0]):
-        x0 = 2 * TILE * tx
-        volume = np.zeros((2 * TILE,) + sub_cross)
-        cover = np.zeros_like(volume)
-        sel = (hi >= x0) & (lo <= x0 + 2 * TILE)
-        if sel.any():
-            scan(np.ascontiguousarray(facets[sel]), x0, volume, cover)
-        # every sub-cell below a fragment gets the fragment's projected area
-        volume += np.cumsum(cover[..., ::-1], axis=-1)[..., ::-1]
-        volume -= cover
-        del cover
+    for tx, volume in enumerate(slabs):
         extremes = [min(extremes[0], float(volume.min())), max(extremes[1], float(volume.max()))]
         volume[np.abs(volume) < ROUND_OFF] = 0.0
         np.clip(volume, 0.0, 1.0, out=volume)
@@ -112,7 +98,6 @@ def volume_fractions(surface: Surface, grid: Grid, *, keep_subcells: bool = Fals
             sub_parts.append(extract_tiles(volume, 2 * TILE, tx))
         carry = volume[-1:].copy()
 
-    warnings = []
     if extremes[0] < -OVERLAP_TOLERANCE or extremes[1] > 1 + OVERLAP_TOLERANCE:
         warnings.append(
             f"sub-cell volumes outside [0, 1] before clamping (min {extremes[0]:.3g}, max {extremes[1]:.3g}): "
@@ -121,6 +106,42 @@ def volume_fractions(surface: Surface, grid: Grid, *, keep_subcells: bool = Fals
     control = {s: concat(tuple(n + o for n, o in zip(grid.shape, s)), TILE, p) for s, p in parts.items()}
     subcells = concat(tuple(2 * n for n in grid.shape), 2 * TILE, sub_parts) if keep_subcells else None
     return VolumeFractions(grid, control, subcells, warnings)
+
+
+def slab_tiles(grid: Grid) -> list[int]:
+    """Tiles per axis; they also cover the far faces (index n along a shifted axis), hence n + 1."""
+    return [-(-(n + 1) // TILE) for n in grid.shape]
+
+
+def scan_slabs(surface: Surface, grid: Grid, tiles: list[int]) -> Iterator[np.ndarray]:
+    """Exact solid volume of every sub-cell (sub-cell units), one slab of tiles along x at a time.
+
+    Yields arrays [2 TILE, 2 TILE tiles[1], ...]; everything beyond the grid is zero.
+    """
+    from ..runtime import ensure_initialized
+    from . import kernels
+
+    ensure_initialized()
+    d = grid.dim
+    facets = (surface.vertices[surface.faces] - np.asarray(grid.origin)) / (0.5 * grid.spacing)  # [N, d, d]
+    _check_inside(facets, grid)
+    if d == 3:
+        # vertical triangles have no projected area: they contribute nothing
+        e1, e2 = facets[:, 1, :2] - facets[:, 0, :2], facets[:, 2, :2] - facets[:, 0, :2]
+        facets = facets[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) != 0]
+    lo, hi = facets[:, :, 0].min(axis=1), facets[:, :, 0].max(axis=1)
+    scan = kernels.scan_triangles if d == 3 else kernels.scan_segments
+    for tx in range(tiles[0]):
+        x0 = 2 * TILE * tx
+        volume = np.zeros((2 * TILE,) + tuple(2 * TILE * t for t in tiles[1:]))
+        cover = np.zeros_like(volume)
+        sel = (hi >= x0) & (lo <= x0 + 2 * TILE)
+        if sel.any():
+            scan(np.ascontiguousarray(facets[sel]), x0, volume, cover)
+        # every sub-cell below a fragment gets the fragment's projected area
+        volume += np.cumsum(cover[..., ::-1], axis=-1)[..., ::-1]
+        volume -= cover
+        yield volume
 
 
 def _check_inside(facets: np.ndarray, grid: Grid) -> None:
