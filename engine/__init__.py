@@ -14,3 +14,13 @@ Importing this package never initialises Taichi; ``engine.runtime.init`` does, o
 """
 
 __version__ = "0.1.0"
+
+
+def simulate(spec, mesh=None, **options):
+    """Run a job (spec as JobSpec/dict/JSON, mesh as bytes or path) and return its ``Result``.
+
+    See ``engine.pipeline.run`` for the options. Imported lazily so ``import engine`` stays light.
+    """
+    from .pipeline import run
+
+    return run(spec, mesh, **options)

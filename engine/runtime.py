@@ -6,6 +6,9 @@ this module does not initialise anything.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +16,8 @@ from typing import Literal
 
 # ti.init otherwise starts a thread that calls out to the internet for a version check.
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+# Taichi prints a banner to stdout on import and init; stdout belongs to our CLI's output.
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 import taichi as ti  # noqa: E402
 
@@ -42,8 +47,8 @@ def default_cache_dir() -> Path:
 def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path | None = None) -> RuntimeInfo:
     """Initialise Taichi once per process; later calls with the same settings are no-ops.
 
-    ``auto`` maps to CUDA, which falls back to the CPU cleanly where there is no GPU
-    (``ti.gpu``/OpenGL probing segfaults on GPU-less machines). Asking for different settings
+    ``auto`` is CUDA where the CUDA driver loads, else the CPU (``ti.gpu``/OpenGL probing
+    segfaults on GPU-less machines; ``ti.cuda`` there falls back to the CPU with warnings). Asking for different settings
     after initialisation raises, because fields allocated under the old runtime would dangle.
     """
     global _current
@@ -61,17 +66,28 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     fp = ti.f64 if precision == "f64" else ti.f32
-    ti_arch = ti.cpu if arch == "cpu" else ti.cuda
-    ti.init(
-        arch=ti_arch,
-        default_fp=fp,
-        offline_cache=True,
-        offline_cache_file_path=str(cache),
-        log_level=ti.WARN,
-    )
+    if arch == "auto":
+        arch = "cuda" if cuda_driver_present() else "cpu"
+    with contextlib.redirect_stdout(io.StringIO()):
+        ti.init(
+            arch=ti.cpu if arch == "cpu" else ti.cuda,
+            default_fp=fp,
+            offline_cache=True,
+            offline_cache_file_path=str(cache),
+            log_level=ti.WARN,
+        )
     chosen = ti.lang.impl.current_cfg().arch
     _current = RuntimeInfo(arch="cuda" if chosen == ti.cuda else "cpu", precision=precision, cache_dir=str(cache))
     return _current
+
+
+def cuda_driver_present() -> bool:
+    """Whether the CUDA driver library loads (what Taichi's CUDA backend needs first)."""
+    try:
+        ctypes.CDLL("libcuda.so.1")
+    except OSError:
+        return False
+    return True
 
 
 def current() -> RuntimeInfo | None:

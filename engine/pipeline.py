@@ -1,0 +1,226 @@
+"""Job spec + mesh -> geometry -> grid -> cut-cell geometry -> (discretization -> solve) -> Result.
+
+The same function serves the CLI, the Python API (``engine.simulate``) and the service workers.
+Stages report through ``progress(stage, fraction, info)``. Until a discretization lands, ``run``
+performs the geometry stages and then raises ``MethodUnavailableError``: it never fakes a field.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from schemas import JobSpec, parse_job
+
+from .errors import GeometryError, GridError, MethodUnavailableError
+from .geometry.cache import GeometryCache, cache_key, default_directory
+from .geometry.fractions import VolumeFractions, control_offsets, volume_fractions
+from .geometry.loading import load_surface, polygon_surface
+from .geometry.surface import Surface
+from .grid import Grid, make_grid
+from .output import FieldData, Result, SolverReport
+
+Progress = Callable[[str, float, dict], None]
+MeshInput = bytes | str | os.PathLike | None
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Work a job may ask for; checked before anything large is allocated.
+
+    max_cells: cells of the background grid; max_memory_bytes: estimated peak of the whole job;
+    max_triangles: surface facets after loading.
+    """
+
+    max_cells: int = 2**28
+    max_memory_bytes: int = int(float(os.environ.get("VOXELASTIC_MAX_MEMORY_GB", "16")) * 2**30)
+    max_triangles: int = 5_000_000
+
+
+@dataclass
+class Geometry:
+    """What the geometry stages produce for one job."""
+
+    surface: Surface
+    grid: Grid
+    fractions: VolumeFractions | None = None
+    cut_cells: object | None = None  # engine.geometry.slicing.CutCells for the DG method
+    warnings: list[str] = field(default_factory=list)
+    stage_times: dict[str, float] = field(default_factory=dict)
+    cache_hit: bool = False
+
+
+def _quiet(stage: str, fraction: float, info: dict) -> None:
+    pass
+
+
+def estimate_memory(grid: Grid, method: str, degree: int = 1) -> int:
+    """Upper estimate of a job's peak memory [bytes] from the grid alone (before any work).
+
+    staggered: per cell, the fractions of every control-volume kind plus ~12 solver vectors per
+    displacement component (CG + multigrid hierarchy). dg: per cell, 7 blocks (element + 6 faces) of
+    (d * basis)^2 doubles, times 4 for assembly copies and the factorisation's fill.
+    """
+    d = grid.dim
+    cells = grid.num_cells
+    if method == "dg":
+        basis = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
+        return cells * 7 * (d * basis) ** 2 * 8 * 4
+    return cells * 8 * (len(control_offsets(d)) + 12 * d)
+
+
+def read_mesh_input(spec: JobSpec, mesh: MeshInput, filename: str | None, base_dir: Path | None) -> tuple[bytes, str]:
+    """The mesh bytes and file name for a job: given bytes/path, or ``geometry.mesh`` on disk."""
+    if isinstance(mesh, (bytes, bytearray)):
+        name = filename or spec.geometry.mesh
+        if not name:
+            raise GeometryError("geometry.mesh: a file name is needed to tell the mesh format of uploaded bytes")
+        return bytes(mesh), name
+    path = Path(mesh) if mesh is not None else None
+    if path is None:
+        if spec.geometry.mesh is None:
+            raise GeometryError("geometry: neither a mesh file nor a polygon is given")
+        path = Path(spec.geometry.mesh)
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+    try:
+        return path.read_bytes(), path.name
+    except OSError as exc:
+        raise GeometryError(f"geometry.mesh: cannot read '{path}': {exc.strerror or exc}") from None
+
+
+def load_geometry(spec: JobSpec, mesh: MeshInput = None, *, filename: str | None = None, base_dir: Path | None = None) -> tuple[Surface, bytes]:
+    """The validated surface of a job and the bytes that identify it (for the cache key)."""
+    g = spec.geometry
+    transform = np.asarray(g.transform, dtype=float) if g.transform is not None else None
+    if g.polygon is not None:
+        surface = polygon_surface([np.asarray(loop, dtype=float) for loop in g.polygon], scale=g.scale, transform=transform)
+        return surface, json.dumps(g.polygon).encode()
+    data, name = read_mesh_input(spec, mesh, filename, base_dir)
+    surface = load_surface(data, filename=name, dimension=spec.dimension, scale=g.scale, transform=transform)
+    return surface, data
+
+
+def prepare_geometry(
+    spec: JobSpec,
+    mesh: MeshInput = None,
+    *,
+    filename: str | None = None,
+    base_dir: Path | None = None,
+    progress: Progress = _quiet,
+    cache: GeometryCache | None = None,
+    limits: Limits = Limits(),
+) -> Geometry:
+    """Load and check the surface, build the grid, and compute the cut-cell geometry the method needs."""
+    times: dict[str, float] = {}
+    t = time.perf_counter()
+    progress("geometry", 0.0, {})
+    surface, identity = load_geometry(spec, mesh, filename=filename, base_dir=base_dir)
+    if len(surface.faces) > limits.max_triangles:
+        raise GeometryError(f"geometry.mesh: {len(surface.faces)} facets exceed the limit of {limits.max_triangles}")
+    times["geometry"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    gs = spec.grid
+    grid = make_grid(*surface.bounds, cell_size=gs.cell_size, resolution=gs.resolution, padding=gs.padding, max_cells=limits.max_cells)
+    method = spec.method.kind
+    need = estimate_memory(grid, method, getattr(spec.method, "degree", 1))
+    if need > limits.max_memory_bytes:
+        raise GridError(
+            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
+            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB; increase grid.cell_size or lower grid.resolution"
+        )
+    times["grid"] = time.perf_counter() - t
+    progress("grid", 0.1, {"shape": list(grid.shape), "spacing": grid.spacing})
+
+    t = time.perf_counter()
+    cache = cache if cache is not None else GeometryCache(default_directory())
+    params = {
+        "dimension": spec.dimension,
+        "geometry": spec.geometry.model_dump(mode="json", exclude={"mesh"}),
+        "grid": grid.to_dict(),
+    }
+    geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
+    if method == "dg":
+        if spec.dimension != 3:
+            raise MethodUnavailableError("method.kind: the DG method is three-dimensional; use 'staggered' for dimension 2")
+        from .geometry.slicing import slice_cells
+
+        geo.cut_cells, geo.cache_hit = cache.get_or_compute(cache_key("slicing", identity, params), lambda: slice_cells(surface, grid))
+        geo.warnings += list(getattr(geo.cut_cells, "warnings", []))
+    else:
+        geo.fractions, geo.cache_hit = cache.get_or_compute(
+            cache_key("fractions", identity, params), lambda: volume_fractions(surface, grid)
+        )
+        geo.warnings += geo.fractions.warnings
+    times["cut_cells"] = time.perf_counter() - t
+    geo.stage_times = times
+    progress("cut_cells", 0.3, {"cache_hit": geo.cache_hit})
+    return geo
+
+
+def cell_fractions(geo: Geometry) -> np.ndarray:
+    """Dense cell volume fractions [*grid.shape] for output, from whichever geometry was computed."""
+    if geo.fractions is not None:
+        return geo.fractions.dense()
+    cut = geo.cut_cells
+    out = np.zeros(geo.grid.shape)
+    np.add.at(out, tuple(np.asarray(cut.piece_cell).T), np.asarray(cut.volume) / geo.grid.spacing**3)
+    return out
+
+
+def geometry_result(spec_dict: dict, geo: Geometry, method: str) -> Result:
+    """A result holding only geometry: cell fractions and the reference surface (no fields)."""
+    surface = geo.surface
+    return Result(
+        grid=geo.grid,
+        method=method,
+        spec=spec_dict,
+        volume_fraction=cell_fractions(geo),
+        fields=FieldData(),
+        surface_vertices=surface.vertices,
+        surface_faces=surface.faces,
+        solver=SolverReport(iterations=0, residual=0.0, stage_times=geo.stage_times, warnings=geo.warnings),
+    )
+
+
+def run(
+    spec: JobSpec | dict | str | bytes,
+    mesh: MeshInput = None,
+    *,
+    filename: str | None = None,
+    base_dir: Path | None = None,
+    progress: Progress = _quiet,
+    cache: GeometryCache | None = None,
+    limits: Limits = Limits(),
+) -> Result:
+    """Run a job end to end. ``mesh``: bytes (with ``filename``) or a path; default geometry.mesh."""
+    if not isinstance(spec, JobSpec):
+        spec = parse_job(spec)
+    from .runtime import init
+
+    init(spec.solver.arch, spec.solver.precision)
+    geo = prepare_geometry(spec, mesh, filename=filename, base_dir=base_dir, progress=progress, cache=cache, limits=limits)
+    raise MethodUnavailableError(
+        f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {_version()} yet; "
+        f"geometry stages completed ({'x'.join(map(str, geo.grid.shape))} grid, "
+        f"solid volume {_solid_volume(geo):.6g}); no fields were computed"
+    )
+
+
+def _solid_volume(geo: Geometry) -> float:
+    if geo.fractions is not None:
+        return geo.fractions.solid_volume()
+    return float(np.sum(geo.cut_cells.volume))
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__

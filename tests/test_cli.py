@@ -1,0 +1,84 @@
+"""The voxelastic command line, run as a real subprocess: exit codes, stdout/stderr, files."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.output import read_result
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "cantilever.json"
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "engine.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_validate_ok_and_every_error_with_its_path(tmp_path):
+    ok = cli("validate", EXAMPLE)
+    assert ok.returncode == 0 and ok.stdout.startswith("OK")
+    spec = json.loads(EXAMPLE.read_text())
+    spec["material"]["poisson_ratio"] = 0.5
+    spec["grid"]["padding"] = -1
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(spec))
+    out = cli("validate", bad)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert any(line.startswith("error: material.poisson_ratio:") for line in lines)
+    assert any(line.startswith("error: grid.padding:") for line in lines)
+    assert "Traceback" not in out.stderr
+
+
+def test_voxelize_writes_exact_fractions_and_the_surface(tmp_path):
+    out = cli("voxelize", ROOT / "examples" / "cantilever.stl", "--cell-size", "0.03", "-o", tmp_path / "bar.h5")
+    assert out.returncode == 0, out.stderr
+    result = read_result(tmp_path / "bar.h5")
+    assert (tmp_path / "bar.xdmf").exists()
+    volume = result.volume_fraction.sum() * result.grid.spacing**3
+    assert abs(volume - 0.04) < 1e-14
+    assert result.surface_faces.shape == (12, 3)
+    assert result.method == "voxelize"
+    assert np.all((result.volume_fraction >= 0) & (result.volume_fraction <= 1))
+
+
+def test_run_stops_after_geometry_with_a_clear_message_and_no_file(tmp_path):
+    job = tmp_path / "job.json"
+    shutil.copy(EXAMPLE, job)
+    shutil.copy(ROOT / "examples" / "cantilever.stl", tmp_path / "cantilever.stl")
+    out = cli("run", job, "-o", tmp_path / "out.h5", "--no-cache")
+    assert out.returncode == 2
+    assert "solver is not available" in out.stderr and "no fields were computed" in out.stderr
+    assert not (tmp_path / "out.h5").exists()
+    assert out.stdout == ""
+
+
+@pytest.mark.parametrize(
+    "mesh_text, reason",
+    [
+        ("this is not a mesh", "cannot read mesh"),
+        ("", "cannot read mesh"),
+    ],
+)
+def test_bad_mesh_is_one_clear_line(tmp_path, mesh_text, reason):
+    mesh = tmp_path / "broken.stl"
+    mesh.write_text(mesh_text)
+    out = cli("voxelize", mesh, "--resolution", "8", "-o", tmp_path / "x.h5")
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert reason in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_missing_job_file_and_missing_mesh(tmp_path):
+    out = cli("run", tmp_path / "nope.json", "-o", tmp_path / "x.h5")
+    assert out.returncode == 2 and "cannot read job file" in out.stderr
+    job = tmp_path / "job.json"
+    shutil.copy(EXAMPLE, job)  # refers to cantilever.stl, absent here
+    out = cli("run", job, "-o", tmp_path / "x.h5")
+    assert out.returncode == 2 and "geometry.mesh: cannot read" in out.stderr

@@ -1,0 +1,66 @@
+"""Pipeline stages: geometry from a spec, limits checked before work, cache by content hash."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.errors import GeometryError, GridError, MethodUnavailableError
+from engine.geometry.cache import GeometryCache
+from engine.pipeline import Limits, prepare_geometry, run
+from schemas import parse_job
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cantilever_spec(**grid):
+    spec = json.loads((ROOT / "examples" / "cantilever.json").read_text())
+    if grid:
+        spec["grid"] = grid
+    return parse_job(spec)
+
+
+def test_geometry_stages_from_bytes_and_cache_hit(tmp_path):
+    spec = cantilever_spec(resolution=16)
+    data = (ROOT / "examples" / "cantilever.stl").read_bytes()
+    cache = GeometryCache(tmp_path / "cache")
+    first = prepare_geometry(spec, data, filename="cantilever.stl", cache=cache)
+    assert not first.cache_hit
+    assert abs(first.fractions.solid_volume() - 0.04) < 1e-14
+    second = prepare_geometry(spec, data, filename="cantilever.stl", cache=cache)
+    assert second.cache_hit
+    np.testing.assert_array_equal(second.fractions.dense(), first.fractions.dense())
+    # a different grid is a different key
+    third = prepare_geometry(cantilever_spec(resolution=12), data, filename="cantilever.stl", cache=cache)
+    assert not third.cache_hit
+
+
+def test_limits_are_checked_before_any_work(tmp_path):
+    spec = cantilever_spec(resolution=64)
+    data = (ROOT / "examples" / "cantilever.stl").read_bytes()
+    with pytest.raises(GridError, match=r"exceeds the limit of 1000"):
+        prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_cells=1000))
+    with pytest.raises(GridError, match=r"GiB for method 'staggered', over the limit"):
+        prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_memory_bytes=10**6))
+    with pytest.raises(GeometryError, match=r"12 facets exceed the limit of 10"):
+        prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_triangles=10))
+
+
+def test_polygon_spec_in_2d():
+    spec = parse_job(
+        {
+            "dimension": 2,
+            "geometry": {"polygon": [[[0, 0], [2, 0], [2, 1], [0, 1]], [[0.5, 0.25], [1.5, 0.25], [1.5, 0.75], [0.5, 0.75]]]},
+            "grid": {"cell_size": 0.1},
+            "material": {"youngs_modulus": 1.0, "poisson_ratio": 0.3},
+        }
+    )
+    geo = prepare_geometry(spec, cache=GeometryCache(None))
+    assert abs(geo.fractions.solid_volume() - 1.5) < 1e-13
+
+
+def test_run_refuses_honestly_until_a_method_lands(tmp_path):
+    spec = cantilever_spec(resolution=8)
+    with pytest.raises(MethodUnavailableError, match="no fields were computed"):
+        run(spec, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))
