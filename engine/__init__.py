@@ -13,7 +13,14 @@ Data flow (each stage a module named after what it produces)::
 Importing this package never initialises Taichi; ``engine.runtime.init`` does, once.
 """
 
+import os as _os
+
 __version__ = "0.1.0"
+
+# Set before any module imports taichi: no version check calling out to the internet, and no
+# banner on stdout (stdout carries the CLI's output).
+_os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+_os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 
 def simulate(spec, mesh=None, **options):

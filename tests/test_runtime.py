@@ -1,0 +1,44 @@
+"""Taichi is initialised only by engine.runtime.init, once per process, with the asked settings."""
+
+import subprocess
+import sys
+import textwrap
+
+
+def run_py(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120)
+
+
+def test_importing_the_package_never_initialises_taichi():
+    out = run_py(
+        """
+        import engine, engine.grid, engine.blocks, engine.pipeline, engine.output, engine.cli
+        import engine.geometry.fractions, engine.geometry.kernels, schemas
+        import taichi.lang.impl as impl
+        print(impl.get_runtime().prog is None)
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"
+
+
+def test_init_once_with_precision_and_refuses_a_switch():
+    out = run_py(
+        """
+        import taichi as ti
+        from engine import runtime
+        info = runtime.init("auto", "f32")
+        assert runtime.init("auto", "f32") is info
+        print(info.arch, info.precision, ti.lang.impl.get_runtime().default_fp == ti.f32)
+        try:
+            runtime.init("cpu", "f64")
+        except RuntimeError as exc:
+            print("refused:", "cannot switch" in str(exc))
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert lines[0].split()[1:] == ["f32", "True"]
+    assert lines[0].split()[0] in ("cpu", "cuda")
+    assert lines[1] == "refused: True"
+    assert "[Taichi]" not in out.stdout  # stdout stays clean for the CLI
