@@ -1,0 +1,644 @@
+"""Surface loading, validation and repair: files or arrays -> an oriented ``Surface``.
+
+3D: any mesh format trimesh reads (STL, OBJ, PLY, OFF, GLB/GLTF, 3MF, ...), from a path or from
+bytes plus a file name whose extension names the format. Scenes are flattened with their node
+transforms. The triangles are then validated and repaired (``mesh_surface``):
+
+1. non-finite coordinates, out-of-range indices, no faces -> ``GeometryError``;
+2. exactly coincident vertices are merged (first occurrence keeps its place, so the vertex order
+   is the input's minus the duplicates) and vertices no face uses are dropped;
+3. faces with a repeated vertex are dropped; repeated faces are reduced to one, and a face
+   paired with its reverse (a double-sided internal wall) cancels out, as it does in every
+   integral over the surface;
+4. winding is made consistent across each connected shell (majority of the input wins);
+5. triangle and quad holes are filled (``trimesh.repair.fill_holes``);
+6. each shell is oriented by its nesting: outer shells outward, cavities inward;
+7. zero or negative enclosed volume -> ``GeometryError``.
+
+Every step that changed something leaves a warning with its numbers in ``Surface.warnings``.
+A surface that is still open is returned with ``closed=False``: inside tests then use the
+generalized winding number (``engine.geometry.winding``).
+
+2D: closed curves of an SVG/DXF drawing (``trimesh.load_path``) or explicit vertex loops
+(``polygon_surface``) -> oriented segments, outer boundaries counter-clockwise, holes clockwise.
+SVG coordinates are used as written (y pointing down on screen).
+
+Placement: ``x' = R (scale * x) + t`` -- the uniform scale first, then the rigid transform
+(``transform`` = [[R, t], [0, 1]], 4x4 in 3D and 3x3 in 2D; R orthogonal).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+import shapely
+import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import breadth_first_tree, connected_components
+from trimesh.exchange.load import compressed_loaders, mesh_formats, path_formats
+from trimesh.resolvers import FilePathResolver
+
+from engine.errors import GeometryError
+from engine.geometry.surface import Surface
+from engine.geometry.winding import winding_number
+
+MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
+
+# Relative tolerances: orthogonality of a transform's linear part, and the enclosed volume
+# (area) below which a surface counts as flat, relative to its bounding-box extent^d.
+_RIGID_TOL = 1e-9
+_FLAT_TOL = 1e-12
+_COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D"
+
+
+def load_surface(
+    source: MeshSource,
+    *,
+    filename: str | None = None,
+    dimension: int = 3,
+    scale: float = 1.0,
+    transform: np.ndarray | None = None,
+) -> Surface:
+    """Read, validate and repair a surface; raises ``GeometryError`` naming the problem.
+
+    source: a path, the file's bytes (then ``filename`` supplies the format by its extension),
+    or an in-memory ``trimesh.Trimesh`` / ``trimesh.Scene``. dimension: 3 for a triangle
+    mesh, 2 for a planar drawing (SVG, DXF). scale: uniform factor (> 0) applied first;
+    transform: rigid [d+1, d+1] homogeneous matrix applied after scaling. Units: whatever the
+    file uses times ``scale`` [m].
+    """
+    if dimension not in (2, 3):
+        raise GeometryError(f"dimension must be 2 or 3, got {dimension!r}")
+    if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
+        if dimension != 3:
+            raise GeometryError("a trimesh mesh or scene needs dimension 3")
+        name = filename or "mesh"
+        scene = trimesh.Scene(source) if isinstance(source, trimesh.Trimesh) else source
+        vertices, faces, notes = _flatten_scene(scene)
+    else:
+        name, data, file_type, resolver = _resolve_source(source, filename)
+        if dimension == 2:
+            loops, notes = _read_drawing(name, data, file_type)
+            surface = polygon_surface(loops, scale=scale, transform=transform, name=name)
+            surface.warnings[:0] = notes
+            return surface
+        if file_type in path_formats():
+            raise GeometryError(
+                f"cannot read mesh '{name}': '{file_type}' is a 2D drawing; use dimension 2"
+            )
+        vertices, faces, notes = _flatten_scene(_read_scene(name, data, file_type, resolver))
+        if len(vertices) == 0:
+            raise GeometryError(
+                f"cannot read mesh '{name}': no mesh found in the file"
+                f" (is it a valid {file_type.upper()} file?)"
+            )
+    surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name)
+    surface.warnings[:0] = notes
+    return surface
+
+
+def mesh_surface(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    *,
+    scale: float = 1.0,
+    transform: np.ndarray | None = None,
+    name: str = "mesh",
+) -> Surface:
+    """Validate, place and repair a triangle mesh: vertices [m, 3] [m], faces [k, 3] int.
+
+    Steps and warnings as in the module docstring; ``name`` labels error messages.
+    """
+    vertices, faces = _checked_arrays(vertices, faces, name)
+    vertices, mirrored = _place(vertices, scale, transform, name)
+    warnings: list[str] = []
+    if mirrored:
+        faces = faces[:, ::-1]
+        warnings.append("the transform mirrors the geometry: reversed all faces to keep them outward")
+    vertices, faces = _merge_vertices(vertices, faces, warnings)
+    faces = _require_faces(_drop_bad_faces(faces, warnings), name)
+    vertices, faces = _drop_unused_vertices(vertices, faces, warnings)
+    faces = _orient_consistently(faces, len(vertices), warnings)
+    faces = _fill_holes(vertices, faces, warnings)
+    # A fill may repeat or cancel an existing face (a hole bounded by a face's own edges).
+    faces = _require_faces(_drop_bad_faces(faces, warnings), name)
+    faces = _orient_consistently(faces, len(vertices), warnings)
+    faces = _orient_by_nesting(vertices, faces, warnings)
+    surface = Surface(vertices=vertices, faces=faces, closed=True, warnings=warnings)
+    _check_volume(surface, name)
+    boundary, conflicts = _open_edges(faces, len(vertices))
+    if boundary or conflicts:
+        surface.closed = False
+        problems = []
+        if boundary:
+            problems.append(
+                f"{boundary} edges without a matching opposite edge (holes larger than quads remain)"
+            )
+        if conflicts:
+            problems.append(f"{conflicts} edges where the winding cannot be made consistent")
+        warnings.append(
+            f"the surface is not closed: {'; '.join(problems)};"
+            " inside tests use the generalized winding number"
+        )
+    return surface
+
+
+def polygon_surface(
+    loops: list,
+    *,
+    scale: float = 1.0,
+    transform: np.ndarray | None = None,
+    name: str = "polygon",
+) -> Surface:
+    """A planar solid from closed vertex loops: each loop [p, 2] [m], first point not repeated
+    (a repeated closing point is dropped). Loops nested in an odd number of others are holes,
+    whatever their given orientation; each loop is reoriented so the solid is on the left of
+    every segment (outer counter-clockwise, holes clockwise). Vertex order is kept: a reversed
+    loop keeps its vertices and swaps its segments' ends.
+    """
+    if len(loops) == 0:
+        raise GeometryError(f"polygon '{name}' has no loops")
+    warnings: list[str] = []
+    clean = [_clean_loop(loop, i, name, warnings) for i, loop in enumerate(loops)]
+    points, _ = _place(np.concatenate(clean), scale, transform, name)  # orientation fixed below
+    offsets = np.cumsum([0] + [len(c) for c in clean])
+    clean = [points[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    faces, reversed_count = [], 0
+    for loop, start, depth in zip(clean, offsets, _loop_depths(clean, name)):
+        idx = start + np.arange(len(loop))
+        segments = np.stack([idx, np.roll(idx, -1)], axis=1)
+        if (_signed_area(loop) > 0) != (depth % 2 == 0):
+            segments = segments[:, ::-1]
+            reversed_count += 1
+        faces.append(segments)
+    if reversed_count:
+        warnings.append(
+            f"reversed {reversed_count} of {len(clean)} loops so that outer boundaries run"
+            " counter-clockwise and holes clockwise"
+        )
+    surface = Surface(points, np.concatenate(faces).astype(np.int64), True, warnings)
+    _check_volume(surface, name)
+    return surface
+
+
+# --- reading ---------------------------------------------------------------------------------
+
+
+def _resolve_source(source, filename: str | None):
+    """(display name, file bytes, trimesh file type, resolver of sibling files or None)."""
+    resolver = None
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        if not filename:
+            raise GeometryError(
+                "mesh bytes need a filename whose extension names the format (e.g. 'part.stl')"
+            )
+        name, data = filename, bytes(source)
+    elif isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        name = filename or path.name
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise GeometryError(f"cannot read mesh '{name}': {exc.strerror or exc}") from None
+        resolver = FilePathResolver(str(path))  # GLTF buffers, OBJ materials beside the file
+    else:
+        raise GeometryError(f"a mesh source must be a path or bytes, got {type(source).__name__}")
+    known = mesh_formats() | path_formats() | set(compressed_loaders)
+    matches = [ft for ft in known if Path(name).name.lower().endswith("." + ft)]
+    if not matches:
+        suffix = Path(name).suffix
+        reason = f"unknown file type '{suffix}'" if suffix else "the file name has no extension"
+        raise GeometryError(f"cannot read mesh '{name}': {reason} (formats: {_COMMON_FORMATS}, ...)")
+    if len(data) == 0:
+        raise GeometryError(f"cannot read mesh '{name}': the file is empty")
+    return name, data, max(matches, key=len), resolver
+
+
+def _read_scene(name: str, data: bytes, file_type: str, resolver) -> trimesh.Scene:
+    # process=False: no merging or reordering by trimesh; repair is done here, with warnings.
+    extra = {"maintain_order": True} if file_type == "obj" else {}
+    try:
+        return trimesh.load_scene(
+            io.BytesIO(data), file_type=file_type, resolver=resolver, process=False, **extra
+        )
+    except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
+        raise GeometryError(f"cannot read mesh '{name}': {_describe(exc)}") from None
+
+
+def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Mesh instances of a scene in world coordinates: (vertices [m, 3], faces [k, 3], notes)."""
+    vertices, faces, skipped, count = [], [], set(), 0
+    for node in scene.graph.nodes_geometry:
+        matrix, geometry_name = scene.graph[node]
+        geometry = scene.geometry[geometry_name]
+        if not isinstance(geometry, trimesh.Trimesh):
+            skipped.add(type(geometry).__name__)
+            continue
+        v = np.asarray(geometry.vertices, dtype=np.float64)
+        f = np.asarray(geometry.faces, dtype=np.int64).reshape(-1, 3)
+        matrix = np.asarray(matrix, dtype=np.float64)
+        if not np.array_equal(matrix, np.eye(4)):
+            v = v @ matrix[:3, :3].T + matrix[:3, 3]
+            if np.linalg.det(matrix[:3, :3]) < 0:
+                f = f[:, ::-1]  # a mirroring node transform turns outward faces inward
+        faces.append(f + count)
+        vertices.append(v)
+        count += len(v)
+    notes = []
+    if skipped:
+        notes.append(f"ignored scene objects that are not triangle meshes ({', '.join(sorted(skipped))})")
+    if len(vertices) > 1:
+        notes.append(f"combined {len(vertices)} mesh instances of the scene into one surface")
+    if not vertices:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes
+    return np.concatenate(vertices), np.concatenate(faces), notes
+
+
+def _read_drawing(name: str, data: bytes, file_type: str) -> tuple[list[np.ndarray], list[str]]:
+    """Closed curves of an SVG/DXF drawing, discretised by trimesh: ([p, 2] loops, notes)."""
+    if file_type not in path_formats():
+        raise GeometryError(f"cannot read drawing '{name}': dimension 2 needs an SVG or DXF file")
+    try:
+        path = trimesh.load_path(io.BytesIO(data), file_type=file_type)
+        loops = [np.asarray(d, dtype=np.float64) for d in path.discrete]
+        dangling = len(path.dangling)
+    except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
+        raise GeometryError(f"cannot read drawing '{name}': {_describe(exc)}") from None
+    if not loops:
+        raise GeometryError(f"drawing '{name}' contains no closed curves")
+    if loops[0].shape[1] == 3:
+        z = np.concatenate(loops)[:, 2]
+        if np.ptp(z) > _RIGID_TOL * max(1.0, np.abs(z).max()):
+            raise GeometryError(f"drawing '{name}' is not planar (z varies by {np.ptp(z):.3g})")
+        loops = [loop[:, :2] for loop in loops]
+    return loops, [f"ignored {dangling} open curves of the drawing"] if dangling else []
+
+
+def _describe(exc: Exception) -> str:
+    lines = str(exc).strip().splitlines()
+    text = lines[0] if lines else ""
+    text = text if len(text) <= 200 else text[:197] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+# --- validation and placement -----------------------------------------------------------------
+
+
+def _checked_arrays(vertices, faces, name: str) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        vertices = np.array(vertices, dtype=np.float64)
+        faces = np.array(faces, dtype=np.int64)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"mesh '{name}': vertices and faces must be numeric arrays ({exc})") from None
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise GeometryError(f"mesh '{name}': vertices must have shape [m, 3], got {list(vertices.shape)}")
+    faces = faces.reshape(-1, 3) if faces.size == 0 else faces
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise GeometryError(f"mesh '{name}': faces must have shape [k, 3], got {list(faces.shape)}")
+    if len(faces) == 0:
+        raise GeometryError(f"mesh '{name}' has no faces")
+    bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+    if bad:
+        raise GeometryError(
+            f"mesh '{name}': {bad} of the {len(vertices)} vertices {'has' if bad == 1 else 'have'}"
+            " non-finite coordinates (NaN or infinity)"
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise GeometryError(
+            f"mesh '{name}': face vertex indices must lie in [0, {len(vertices) - 1}],"
+            f" found {faces.min()}..{faces.max()}"
+        )
+    return vertices, faces
+
+
+def _require_faces(faces: np.ndarray, name: str) -> np.ndarray:
+    if len(faces) == 0:
+        raise GeometryError(
+            f"mesh '{name}' encloses no volume: no faces are left after removing degenerate"
+            " and cancelling faces"
+        )
+    return faces
+
+
+def _place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.ndarray, bool]:
+    """x' = R (scale x) + t; returns (points [m, d], whether R mirrors)."""
+    d = points.shape[1]
+    if not (isinstance(scale, (int, float, np.number)) and np.isfinite(scale) and scale > 0):
+        raise GeometryError(f"'{name}': scale must be a finite number > 0, got {scale!r}")
+    points = points * float(scale)
+    mirrored = False
+    if transform is not None:
+        try:
+            m = np.array(transform, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise GeometryError(f"'{name}': transform must be a numeric [{d + 1}, {d + 1}] matrix") from None
+        if m.shape != (d + 1, d + 1) or not np.isfinite(m).all():
+            raise GeometryError(
+                f"'{name}': transform must be a finite [{d + 1}, {d + 1}] homogeneous matrix,"
+                f" got shape {list(m.shape)}"
+            )
+        r, t = m[:d, :d], m[:d, d]
+        if np.any(m[d] != np.eye(d + 1)[d]) or np.abs(r.T @ r - np.eye(d)).max() > _RIGID_TOL:
+            raise GeometryError(
+                f"'{name}': transform must be rigid: [[R, t], [0, 1]] with R orthogonal"
+                " (use scale for resizing)"
+            )
+        points = points @ r.T + t
+        mirrored = bool(np.linalg.det(r) < 0)
+    if not np.isfinite(points).all():
+        raise GeometryError(f"'{name}': coordinates overflow after scaling by {scale!r}")
+    return points, mirrored
+
+
+def _check_volume(surface: Surface, name: str) -> None:
+    lo, hi = surface.bounds
+    extent = hi - lo
+    # About the centre of the bounds: the same for closed surfaces, and for open ones a
+    # measure that does not grow with the distance to the origin (a flat sheet gives 0).
+    volume = Surface(surface.vertices - (lo + hi) / 2, surface.faces).enclosed_volume()
+    what = "volume" if surface.dim == 3 else "area"
+    if volume > _FLAT_TOL * float(extent.max()) ** surface.dim:
+        return
+    if extent.min() <= _FLAT_TOL * extent.max():
+        axis = "xyz"[int(np.argmin(extent))]
+        raise GeometryError(f"'{name}' encloses no {what}: it is flat (zero extent along {axis})")
+    raise GeometryError(f"'{name}' encloses no {what}: the enclosed {what} is {volume:.6g} after repair")
+
+
+# --- 3D repair ----------------------------------------------------------------------------------
+
+
+def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]):
+    """Merge exactly equal vertices, keeping first occurrences in their input order."""
+    # + 0.0 turns -0.0 into 0.0 so both compare equal as rows.
+    _, first, inverse = np.unique(vertices + 0.0, axis=0, return_index=True, return_inverse=True)
+    if len(first) == len(vertices):
+        return vertices, faces
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    warnings.append(
+        f"merged {len(vertices) - len(first)} duplicate vertices ({len(vertices)} -> {len(first)});"
+        " vertex numbering differs from the input"
+    )
+    return vertices[first[order]], rank[inverse.reshape(-1)][faces]
+
+
+def _drop_bad_faces(faces: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """Drop faces with a repeated vertex; reduce each set of faces on the same three vertices to
+    their net orientation: one face, or none where opposite faces cancel."""
+    degenerate = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
+    if degenerate.any():
+        warnings.append(f"removed {int(degenerate.sum())} degenerate faces (a vertex repeated)")
+        faces = faces[~degenerate]
+    if len(faces) == 0:
+        return faces
+    key = np.sort(faces, axis=1)
+    n = int(key.max()) + 1
+    if n <= 2**21:  # one int64 per sorted triple: a 1D unique is much faster than rows
+        key = (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
+    axis = 0 if key.ndim == 2 else None
+    _, group, counts = np.unique(key, axis=axis, return_inverse=True, return_counts=True)
+    group = group.reshape(-1)
+    if counts.max() == 1:
+        return faces
+    # Orientation of a face relative to its sorted vertex triple: rotate the smallest index to
+    # the front; (min, a, b) with a < b is the sorted cyclic order (+1), else reversed (-1).
+    rows, roll = np.arange(len(faces)), np.argmin(faces, axis=1)
+    sign = np.where(faces[rows, (roll + 1) % 3] < faces[rows, (roll + 2) % 3], 1, -1)
+    net = np.bincount(group, weights=sign, minlength=len(counts)).astype(np.int64)
+    candidate = (sign == np.sign(net[group])) & (net[group] != 0)
+    keep = np.zeros(len(faces), dtype=bool)
+    keep[np.nonzero(candidate)[0][np.unique(group[candidate], return_index=True)[1]]] = True
+    shared = net[counts > 1]
+    repeated = int(np.sum(np.abs(shared) - (shared != 0)))
+    cancelled = int(counts[counts > 1].sum() - np.abs(shared).sum())
+    if repeated:
+        warnings.append(f"removed {repeated} repeated faces")
+    if cancelled:
+        warnings.append(
+            f"removed {cancelled} faces that cancel in pairs (coincident with opposite orientation)"
+        )
+    return faces[keep]
+
+
+def _drop_unused_vertices(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]):
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces] = True
+    if used.all():
+        return vertices, faces
+    warnings.append(
+        f"removed {int((~used).sum())} vertices that no face uses;"
+        " vertex numbering differs from the input"
+    )
+    return vertices[used], (np.cumsum(used) - 1)[faces]
+
+
+def _edges(faces: np.ndarray, n_vertices: int):
+    """Undirected edges of the faces: (edge id per face corner [3k], faces per edge [e],
+    directed ends per corner [3k, 2]); corner 3 f + j is the edge leaving vertex j of face f."""
+    ends = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.minimum(ends[:, 0], ends[:, 1]) * n_vertices + np.maximum(ends[:, 0], ends[:, 1])
+    _, edge, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return edge.reshape(-1), counts, ends
+
+
+def _manifold_adjacency(faces: np.ndarray, n_vertices: int):
+    """Face pairs across edges used by exactly two faces: (face a [p], face b [p], same
+    direction [p] bool: both traverse the edge the same way, so one must be reversed)."""
+    edge, counts, ends = _edges(faces, n_vertices)
+    corner = np.argsort(edge, kind="stable")
+    two = np.concatenate([[0], np.cumsum(counts)[:-1]])[counts == 2]
+    c0, c1 = corner[two], corner[two + 1]
+    return c0 // 3, c1 // 3, ends[c0, 0] == ends[c1, 0]
+
+
+def _shells(faces: np.ndarray, n_vertices: int):
+    """(number of shells, shell label per face [k]): faces connected across manifold edges."""
+    fa, fb, same = _manifold_adjacency(faces, n_vertices)
+    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(len(faces), len(faces)))
+    n, label = connected_components(graph, directed=False)
+    return n, label, (fa, fb, same)
+
+
+def _orient_consistently(faces: np.ndarray, n_vertices: int, warnings: list[str]) -> np.ndarray:
+    """Reverse faces so that neighbours across manifold edges agree, per connected shell; in
+    each shell the orientation held by the majority of its faces is kept."""
+    k = len(faces)
+    n_shells, label, (fa, fb, same) = _shells(faces, n_vertices)
+    if not same.any():
+        return faces
+    # A spanning tree from a virtual root (node k) linked to one face of every shell; edge
+    # weight = 1 + (child must be reversed relative to parent), so no weight is zero.
+    roots = np.unique(label, return_index=True)[1]
+    rows, cols = np.concatenate([fa, np.full(n_shells, k)]), np.concatenate([fb, roots])
+    weight = np.concatenate([1 + same, np.ones(n_shells)])
+    graph = coo_matrix((weight, (rows, cols)), shape=(k + 1, k + 1)).tocsr()
+    tree = breadth_first_tree(graph, k, directed=False).tocoo()
+    parent, flip = np.arange(k + 1), np.zeros(k + 1, dtype=np.int64)
+    parent[tree.col], flip[tree.col] = tree.row, np.rint(tree.data).astype(np.int64) - 1
+    # XOR of the relative flips along the path to the root, by pointer jumping (log depth steps).
+    while not np.array_equal(parent[parent], parent):
+        flip ^= flip[parent]
+        parent = parent[parent]
+    flip = flip[:k].astype(bool)
+    majority = np.bincount(label, weights=flip, minlength=n_shells) > np.bincount(label) / 2
+    flip ^= majority[label]
+    if flip.any():
+        faces = faces.copy()
+        faces[flip] = faces[flip, ::-1]
+        warnings.append(
+            f"reversed {int(flip.sum())} faces to make the winding consistent with their neighbours"
+        )
+    return faces
+
+
+def _open_edges(faces: np.ndarray, n_vertices: int) -> tuple[int, int]:
+    """(edges without a partner, edges shared by several faces but not in opposite pairs).
+
+    The surface is closed -- the boundary of a solid, so the divergence theorem and the signed
+    prism sums are exact -- when every edge a->b is matched by as many edges b->a. This also
+    accepts non-manifold edges shared by two touching shells.
+    """
+    edge, counts, ends = _edges(faces, n_vertices)
+    direction = np.where(ends[:, 0] < ends[:, 1], 1, -1)
+    unbalanced = np.bincount(edge, weights=direction, minlength=len(counts)) != 0
+    return int(np.sum(unbalanced & (counts == 1))), int(np.sum(unbalanced & (counts > 1)))
+
+
+def _fill_holes(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) -> np.ndarray:
+    if _open_edges(faces, len(vertices))[0] == 0:
+        return faces
+    before = _boundary_loops(faces, len(vertices))
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+    try:
+        trimesh.repair.fill_holes(mesh)  # triangle and quad holes only, oriented to the rim
+    except Exception:  # noqa: BLE001 - a failed fill leaves the mesh open, which is reported
+        return faces
+    if len(mesh.faces) == len(faces):
+        return faces
+    filled = np.asarray(mesh.faces, dtype=np.int64)
+    holes = before - _boundary_loops(filled, len(vertices))
+    added = len(filled) - len(faces)
+    warnings.append(
+        f"filled {holes} {'hole' if holes == 1 else 'holes'} with {added}"
+        f" {'triangle' if added == 1 else 'triangles'}"
+    )
+    return filled
+
+
+def _boundary_loops(faces: np.ndarray, n_vertices: int) -> int:
+    """Number of connected curves formed by edges used by a single face."""
+    edge, counts, ends = _edges(faces, n_vertices)
+    single = counts[edge] == 1
+    if not single.any():
+        return 0
+    a, b = ends[single, 0], ends[single, 1]
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n_vertices, n_vertices))
+    label = connected_components(graph, directed=False)[1]
+    return len(np.unique(label[a]))
+
+
+def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """Orient every shell by how deeply it is nested.
+
+    A shell inside an odd number of other shells bounds a cavity and must face inward (negative
+    volume); all others face outward. Orienting each shell to positive volume on its own --
+    what ``trimesh.repair.fix_normals`` does -- would turn the cavity of a hollow sphere into a
+    second solid ball, and an overall volume check would miss an inverted shell among others.
+    """
+    n_shells, label, _ = _shells(faces, len(vertices))
+    order = np.argsort(label, kind="stable")
+    members = np.split(order, np.cumsum(np.bincount(label, minlength=n_shells))[:-1])
+    volume = np.zeros(n_shells)
+    lower, upper, probe = np.zeros((n_shells, 3)), np.zeros((n_shells, 3)), np.zeros((n_shells, 3))
+    for s, shell in enumerate(members):
+        p = vertices[faces[shell]]
+        # Volume about the shell's own centroid: independent of the origin for closed shells,
+        # and a stable orientation measure for almost-closed ones.
+        q = p - p.reshape(-1, 3).mean(axis=0)
+        volume[s] = np.einsum("ij,ij->i", q[:, 0], np.cross(q[:, 1], q[:, 2])).sum() / 6.0
+        lower[s], upper[s] = p.reshape(-1, 3).min(axis=0), p.reshape(-1, 3).max(axis=0)
+        area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        probe[s] = p[np.argmax(area)].mean(axis=0)  # a point on the shell, off its edges
+    depth = np.zeros(n_shells, dtype=np.int64)
+    for s in range(n_shells if n_shells > 1 else 0):
+        # Only shells whose bounding box lies within this one's can be inside it.
+        inner = np.nonzero((lower >= lower[s]).all(axis=1) & (upper <= upper[s]).all(axis=1))[0]
+        inner = inner[inner != s]
+        if len(inner):
+            depth[inner] += np.abs(winding_number(vertices, faces[members[s]], probe[inner])) > 0.5
+    flat = np.abs(volume) <= _FLAT_TOL * (upper - lower).max(axis=1) ** 3
+    wrong = ~flat & ((volume > 0) != (depth % 2 == 0))
+    if not wrong.any():
+        return faces
+    flip = wrong[label]
+    faces = faces.copy()
+    faces[flip] = faces[flip, ::-1]
+    if wrong.all():
+        warnings.append(f"inverted all faces: enclosed volume was negative ({volume.sum():.6g})")
+    else:
+        after = np.abs(volume).dot(np.where(depth % 2 == 0, 1.0, -1.0))
+        warnings.append(
+            f"inverted {int(wrong.sum())} of {n_shells} shells so that outer shells face outward"
+            f" and cavities inward (enclosed volume {volume.sum():.6g} -> {after:.6g})"
+        )
+    return faces
+
+
+# --- 2D polygons ---------------------------------------------------------------------------------
+
+
+def _clean_loop(loop, i: int, name: str, warnings: list[str]) -> np.ndarray:
+    try:
+        p = np.array(loop, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise GeometryError(f"polygon '{name}': loop {i} must be a list of [x, y] points") from None
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise GeometryError(f"polygon '{name}': loop {i} must have shape [p, 2], got {list(p.shape)}")
+    bad = int((~np.isfinite(p).all(axis=1)).sum())
+    if bad:
+        raise GeometryError(
+            f"polygon '{name}': loop {i} has {bad} points with non-finite coordinates (NaN or infinity)"
+        )
+    repeat = np.all(p == np.roll(p, -1, axis=0), axis=1)
+    if repeat.any() and len(p) > 1:
+        # The closing copy of the first point is expected; other repeats are zero-length segments.
+        extra = int(repeat.sum()) - int(repeat[-1])
+        if extra:
+            warnings.append(f"loop {i}: removed {extra} repeated consecutive points")
+        p = p[~repeat]
+    if len(p) < 3 or _signed_area(p) == 0.0:
+        raise GeometryError(f"polygon '{name}': loop {i} encloses no area ({len(p)} distinct points)")
+    return p
+
+
+def _signed_area(loop: np.ndarray) -> float:
+    x, y = loop[:, 0], loop[:, 1]
+    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _loop_depths(loops: list[np.ndarray], name: str) -> np.ndarray:
+    """How many other loops enclose each loop; loops must not cross themselves or each other."""
+    polygons = [shapely.Polygon(p) for p in loops]
+    for i, polygon in enumerate(polygons):
+        if not polygon.is_valid:
+            reason = shapely.is_valid_reason(polygon)
+            raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve ({reason})")
+    depth = np.zeros(len(loops), dtype=np.int64)
+    for i, j in shapely.STRtree(polygons).query(polygons).T:  # pairs with overlapping boxes
+        if i >= j:
+            continue
+        a, b = polygons[i], polygons[j]
+        if a.equals(b):
+            raise GeometryError(f"polygon '{name}': loops {i} and {j} coincide")
+        if b.contains(a):
+            depth[i] += 1
+        elif a.contains(b):
+            depth[j] += 1
+        elif a.overlaps(b) or a.boundary.crosses(b.boundary):
+            raise GeometryError(f"polygon '{name}': loops {i} and {j} cross each other")
+    return depth

@@ -1,0 +1,363 @@
+"""Surface loading, validation and repair (engine.geometry.loading)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+import trimesh
+from trimesh.path.exchange.dxf import export_dxf
+
+from engine.errors import GeometryError
+from engine.geometry.loading import load_surface, mesh_surface, polygon_surface
+from engine.geometry.winding import winding_number
+
+
+def _sphere(radius: float = 1.0) -> trimesh.Trimesh:
+    return trimesh.creation.icosphere(subdivisions=2, radius=radius)  # 320 faces
+
+
+def _boundary_edge_count(faces: np.ndarray) -> int:
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return int(np.sum(counts == 1))
+
+
+def _tet_volume(p: np.ndarray) -> float:
+    return float(np.linalg.det(p[1:] - p[0]) / 6.0)
+
+
+# --- repair -------------------------------------------------------------------------------------
+
+
+def test_sphere_with_a_triangle_and_a_quad_hole_is_closed_again():
+    sphere = _sphere()
+    v0 = sphere.volume
+    # A quad hole: two faces sharing an edge, on the side opposite face 0 (the triangle hole).
+    far = int(np.argmin(sphere.triangles_center @ sphere.triangles_center[0]))
+    pair = sphere.face_adjacency[np.any(sphere.face_adjacency == far, axis=1)][0]
+    faces = np.delete(sphere.faces, [0, *pair], axis=0)
+    surface = mesh_surface(sphere.vertices, faces)
+    assert surface.closed
+    assert surface.warnings == ["filled 2 holes with 3 triangles"]
+    assert len(surface.faces) == 320
+    # The triangle comes back exactly; the quad may be split along the other diagonal, which
+    # changes the volume by exactly the tetrahedron of the quad's four corners.
+    quad = np.unique(sphere.faces[pair])
+    tet = abs(_tet_volume(sphere.vertices[quad]))
+    error = abs(surface.enclosed_volume() - v0)
+    assert min(error, abs(error - tet)) < 1e-13
+    assert tet > 1e-4  # the bound is not vacuous
+
+
+def test_big_hole_stays_open_and_says_winding_number():
+    sphere = _sphere()
+    cap = sphere.triangles_center[:, 2] > 0.7
+    faces = sphere.faces[~cap]
+    boundary = _boundary_edge_count(faces)
+    assert boundary > 4  # larger than a quad: fill_holes leaves it
+    surface = mesh_surface(sphere.vertices, faces)
+    assert not surface.closed
+    assert surface.warnings[-1].startswith(
+        f"the surface is not closed: {boundary} edges without a matching opposite edge"
+    )
+    assert "generalized winding number" in surface.warnings[-1]
+    # Unused cap vertices are dropped; the open surface is still usable for inside tests.
+    unused = len(sphere.vertices) - len(np.unique(faces))
+    assert surface.warnings[0].startswith(f"removed {unused} vertices that no face uses")
+    w = winding_number(surface.vertices, surface.faces, np.array([[0.0, 0.0, -0.5], [0.0, 0.0, 3.0]]))
+    assert w[0] > 0.9 and abs(w[1]) < 0.1
+
+
+def test_inverted_box_is_turned_outward():
+    box = trimesh.creation.box(extents=(2.0, 3.0, 4.0))
+    surface = mesh_surface(box.vertices, box.faces[:, ::-1])
+    assert surface.warnings == ["inverted all faces: enclosed volume was negative (-24)"]
+    assert surface.enclosed_volume() == pytest.approx(24.0, rel=1e-14)
+    np.testing.assert_array_equal(surface.faces, box.faces)
+
+
+def test_inconsistent_faces_are_reversed_by_majority():
+    sphere = _sphere()
+    faces = sphere.faces.copy()
+    faces[::7] = faces[::7, ::-1]
+    surface = mesh_surface(sphere.vertices, faces)
+    assert surface.warnings == ["reversed 46 faces to make the winding consistent with their neighbours"]
+    np.testing.assert_array_equal(surface.faces, sphere.faces)
+
+
+def test_hollow_sphere_keeps_its_inward_cavity():
+    outer, inner = _sphere(1.0), _sphere(0.5)
+    vertices = np.vstack([outer.vertices, inner.vertices])
+    expected = outer.volume - inner.volume
+    # Inscribed shells of the same shape: the discrete 4/3 pi (R^3 - r^3), a little below it.
+    assert expected == pytest.approx(outer.volume * (1 - 0.5**3), rel=1e-14)
+    assert 0.96 < expected / (4 / 3 * np.pi * (1 - 0.5**3)) < 1
+    surface = mesh_surface(vertices, np.vstack([outer.faces, inner.faces[:, ::-1] + len(outer.vertices)]))
+    assert surface.closed and surface.warnings == []
+    assert surface.enclosed_volume() == pytest.approx(expected, rel=1e-13)
+    # Both shells given outward: the cavity is turned inward, by its nesting.
+    surface = mesh_surface(vertices, np.vstack([outer.faces, inner.faces + len(outer.vertices)]))
+    assert surface.warnings[0].startswith(
+        "inverted 1 of 2 shells so that outer shells face outward and cavities inward"
+    )
+    assert surface.enclosed_volume() == pytest.approx(expected, rel=1e-13)
+
+
+def test_disjoint_bodies_and_an_island_in_a_cavity():
+    shells = [_sphere(1.0), _sphere(0.6), _sphere(0.3), _sphere(0.5)]
+    offsets = [(0, 0, 0), (0, 0, 0), (0, 0, 0), (3, 0, 0)]
+    vertices, faces, n = [], [], 0
+    for shell, offset in zip(shells, offsets):
+        vertices.append(shell.vertices + offset)
+        faces.append(shell.faces[:, ::-1] + n)  # all given inward
+        n += len(shell.vertices)
+    surface = mesh_surface(np.vstack(vertices), np.vstack(faces))
+    volumes = [s.volume for s in shells]
+    # depth 0, 1, 2 around the origin and a separate ball: + - + +
+    expected = volumes[0] - volumes[1] + volumes[2] + volumes[3]
+    assert surface.enclosed_volume() == pytest.approx(expected, rel=1e-13)
+    assert surface.warnings[0].startswith("inverted 3 of 4 shells")
+
+
+def test_duplicate_and_cancelling_faces_are_removed():
+    box = trimesh.creation.box()
+    faces = np.vstack([box.faces, box.faces[:2], box.faces[2:3, ::-1], box.faces[2:3, ::-1]])
+    surface = mesh_surface(box.vertices, faces)
+    # Faces 0 and 1 twice: one copy each goes. Face 2 and two reverses: net one reversed face
+    # stays, which the winding repair turns back.
+    assert surface.warnings == [
+        "removed 2 repeated faces",
+        "removed 2 faces that cancel in pairs (coincident with opposite orientation)",
+        "reversed 1 faces to make the winding consistent with their neighbours",
+    ]
+    assert len(surface.faces) == 12 and surface.closed
+    assert surface.enclosed_volume() == pytest.approx(1.0, rel=1e-14)
+
+
+def test_stl_corners_are_merged_and_vertex_order_of_obj_is_kept():
+    box = trimesh.creation.box()
+    surface = load_surface(box.export(file_type="stl"), filename="box.stl")
+    assert surface.warnings == [
+        "merged 28 duplicate vertices (36 -> 8); vertex numbering differs from the input"
+    ]
+    assert surface.closed and surface.enclosed_volume() == pytest.approx(1.0, rel=1e-14)
+    order = np.random.default_rng(1).permutation(8)
+    obj = "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in box.vertices[order])
+    obj += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in np.argsort(order)[box.faces])
+    surface = load_surface(obj.encode(), filename="box.obj")
+    assert surface.warnings == []
+    np.testing.assert_array_equal(surface.vertices, box.vertices[order])
+
+
+# --- errors -------------------------------------------------------------------------------------
+
+
+def test_nan_vertex_is_rejected():
+    obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 1\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 3 1 4\n"
+    message = r"^mesh 'a.obj': 1 of the 4 vertices has non-finite coordinates \(NaN or infinity\)$"
+    with pytest.raises(GeometryError, match=message):
+        load_surface(obj, filename="a.obj")
+    box = trimesh.creation.box()
+    vertices = box.vertices.copy()
+    vertices[[1, 5], 0] = np.inf
+    with pytest.raises(GeometryError, match="2 of the 8 vertices have non-finite"):
+        mesh_surface(vertices, box.faces)
+
+
+@pytest.mark.parametrize("filename", ["x.stl", "x.ply", "x.off", "x.glb", "x.obj"])
+def test_garbage_bytes_are_rejected(filename):
+    with pytest.raises(GeometryError, match=rf"^cannot read mesh '{filename}': "):
+        load_surface(b"\x00\x01garbage\xff\xfe 12 x", filename=filename)
+
+
+def test_unreadable_sources_name_the_problem(tmp_path):
+    with pytest.raises(GeometryError, match=r"^cannot read mesh 'x.foo': unknown file type '.foo'"):
+        load_surface(b"solid", filename="x.foo")
+    with pytest.raises(GeometryError, match="need a filename"):
+        load_surface(b"solid")
+    with pytest.raises(GeometryError, match=r"^cannot read mesh 'missing.stl': No such file"):
+        load_surface(tmp_path / "missing.stl")
+    with pytest.raises(GeometryError, match=r"^cannot read mesh 'x.stl': the file is empty$"):
+        load_surface(b"", filename="x.stl")
+    message = r"^cannot read mesh 'shape.svg': 'svg' is a 2D drawing; use dimension 2$"
+    with pytest.raises(GeometryError, match=message):
+        load_surface(b"<svg/>", filename="shape.svg")
+    with pytest.raises(GeometryError, match="dimension 2 needs an SVG or DXF file"):
+        load_surface(b"solid", filename="x.stl", dimension=2)
+
+
+def test_mesh_without_faces_is_rejected():
+    message = r"^cannot read mesh 'points.obj': no mesh found in the file \(is it a valid OBJ file\?\)$"
+    with pytest.raises(GeometryError, match=message):
+        load_surface(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", filename="points.obj")
+    with pytest.raises(GeometryError, match=r"^mesh 'points' has no faces$"):
+        mesh_surface(np.eye(3), np.zeros((0, 3), dtype=int), name="points")
+    with pytest.raises(GeometryError, match=r"^cannot read mesh 'empty.stl': no mesh found"):
+        load_surface(b"solid empty\nendsolid empty\n", filename="empty.stl")
+
+
+def test_flat_meshes_are_rejected():
+    box = trimesh.creation.box()
+    flat = box.vertices * [1.0, 1.0, 0.0]  # top and bottom collapse onto each other
+    with pytest.raises(GeometryError, match="encloses no volume"):
+        mesh_surface(flat, box.faces)
+    sheet = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1.0]])
+    message = r"^'sheet' encloses no volume: it is flat \(zero extent along z\)$"
+    with pytest.raises(GeometryError, match=message):
+        mesh_surface(sheet, [[0, 1, 2], [0, 2, 3]], name="sheet")
+    with pytest.raises(GeometryError, match="all 3 faces|no faces are left"):
+        mesh_surface(box.vertices, [[0, 0, 1], [2, 2, 2], [3, 4, 3]])
+
+
+def test_bad_placement_and_indices_are_rejected():
+    box = trimesh.creation.box()
+    with pytest.raises(GeometryError, match="scale must be a finite number > 0, got -1.0"):
+        mesh_surface(box.vertices, box.faces, scale=-1.0)
+    with pytest.raises(GeometryError, match="transform must be rigid"):
+        mesh_surface(box.vertices, box.faces, transform=np.diag([2.0, 1.0, 1.0, 1.0]))
+    message = r"transform must be a finite \[4, 4\] homogeneous matrix, got shape \[3, 3\]"
+    with pytest.raises(GeometryError, match=message):
+        mesh_surface(box.vertices, box.faces, transform=np.eye(3))
+    with pytest.raises(GeometryError, match=r"face vertex indices must lie in \[0, 7\], found 0..8"):
+        mesh_surface(box.vertices, np.vstack([box.faces, [[0, 1, 8]]]))
+
+
+# --- sources and placement ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("file_type", ["stl", "obj", "ply", "off", "glb"])
+def test_bytes_and_path_give_the_same_surface(tmp_path, file_type):
+    sphere = _sphere()
+    data = sphere.export(file_type=file_type)
+    data = data.encode() if isinstance(data, str) else data
+    path = tmp_path / f"ball.{file_type}"
+    path.write_bytes(data)
+    from_path, from_bytes = load_surface(path), load_surface(data, filename=f"ball.{file_type}")
+    np.testing.assert_array_equal(from_path.vertices, from_bytes.vertices)
+    np.testing.assert_array_equal(from_path.faces, from_bytes.faces)
+    assert from_path.warnings == from_bytes.warnings
+    # STL, PLY and GLB store float32, OBJ 8 decimals.
+    assert from_path.enclosed_volume() == pytest.approx(sphere.volume, rel=1e-7)
+
+
+def test_scale_then_rigid_transform():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    rotation = trimesh.transformations.rotation_matrix(0.7, [1.0, 2.0, 0.5])
+    transform = trimesh.transformations.translation_matrix([10.0, -5.0, 2.0]) @ rotation
+    surface = mesh_surface(box.vertices, box.faces, scale=2.0, transform=transform)
+    assert surface.enclosed_volume() == pytest.approx(6.0 * 8.0, rel=1e-13)
+    corners = (box.vertices * 2.0) @ transform[:3, :3].T + transform[:3, 3]
+    lower, upper = surface.bounds
+    np.testing.assert_allclose(lower, corners.min(axis=0), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(upper, corners.max(axis=0), rtol=0, atol=1e-13)
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    surface = mesh_surface(box.vertices, box.faces, transform=mirror)
+    assert surface.warnings == ["the transform mirrors the geometry: reversed all faces to keep them outward"]
+    assert surface.enclosed_volume() == pytest.approx(6.0, rel=1e-14)
+
+
+def test_glb_scene_nodes_are_flattened():
+    scene = trimesh.Scene()
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    move = trimesh.transformations.translation_matrix
+    turn = trimesh.transformations.rotation_matrix(np.pi / 4, [0.0, 0.0, 1.0])
+    scene.add_geometry(box, node_name="a", geom_name="box", transform=move([5.0, 0.0, 0.0]))
+    scene.add_geometry(box, node_name="b", geom_name="box", transform=move([0.0, 5.0, 0.0]) @ turn)
+    surface = load_surface(scene.export(file_type="glb"), filename="two.glb")
+    assert surface.warnings == ["combined 2 mesh instances of the scene into one surface"]
+    assert surface.closed
+    assert surface.enclosed_volume() == pytest.approx(2.0, rel=1e-6)  # GLB stores float32
+    lower, upper = surface.bounds
+    half_diagonal = np.sqrt(0.5)
+    np.testing.assert_allclose(lower, [-half_diagonal, -0.5, -0.5], atol=1e-6)
+    np.testing.assert_allclose(upper, [5.5, 5.0 + half_diagonal, 0.5], atol=1e-6)
+
+
+def test_gltf_path_resolves_its_buffer_file(tmp_path):
+    files = _sphere().export(file_type="gltf")  # {"model.gltf": ..., "gltf_buffer_0.bin": ...}
+    assert len(files) > 1
+    for file_name, content in files.items():
+        (tmp_path / file_name).write_bytes(content)
+    surface = load_surface(tmp_path / "model.gltf")
+    assert surface.closed and surface.enclosed_volume() == pytest.approx(_sphere().volume, rel=1e-7)
+    with pytest.raises(GeometryError, match=r"^cannot read mesh 'model.gltf': "):
+        load_surface(files["model.gltf"], filename="model.gltf")  # bytes alone: no buffer
+
+
+def test_trimesh_objects_are_accepted():
+    surface = load_surface(_sphere(2.0))
+    assert surface.closed and surface.enclosed_volume() == pytest.approx(_sphere(2.0).volume, rel=1e-14)
+
+
+# --- 2D -------------------------------------------------------------------------------------------
+
+
+def _loop_area(vertices: np.ndarray, segments: np.ndarray) -> float:
+    p = vertices[segments]
+    return float((p[:, 0, 0] * p[:, 1, 1] - p[:, 1, 0] * p[:, 0, 1]).sum() / 2.0)
+
+
+def test_polygon_with_a_hole_is_oriented():
+    outer = [[0, 0], [0, 4], [4, 4], [4, 0]]  # clockwise: must be reversed
+    hole = [[1, 1], [3, 1], [3, 3], [1, 3]]  # counter-clockwise: must be reversed
+    island = [[1.5, 1.5], [2.5, 1.5], [2.5, 2.5], [1.5, 2.5], [1.5, 1.5]]  # closing point repeated
+    surface = polygon_surface([outer, hole, island])
+    assert surface.warnings == [
+        "reversed 2 of 3 loops so that outer boundaries run counter-clockwise and holes clockwise"
+    ]
+    assert surface.enclosed_volume() == 16.0 - 4.0 + 1.0
+    # Vertex order kept; the island's repeated closing point dropped.
+    np.testing.assert_array_equal(surface.vertices[:8], np.array(outer + hole, dtype=float))
+    assert len(surface.vertices) == 12
+    assert _loop_area(surface.vertices, surface.faces[:4]) == 16.0
+    assert _loop_area(surface.vertices, surface.faces[4:8]) == -4.0
+    assert _loop_area(surface.vertices, surface.faces[8:]) == 1.0
+    probes = np.array([[0.5, 0.5], [1.2, 2.0], [2.0, 2.0], [5.0, 0.0]])
+    w = winding_number(surface.vertices, surface.faces, probes)
+    np.testing.assert_allclose(w, [1, 0, 1, 0], atol=1e-14)
+
+
+def test_polygon_placement_and_errors():
+    square = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    turn = np.array([[0.0, -1.0, 3.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    surface = polygon_surface([square], scale=2.0, transform=turn)
+    assert surface.warnings == [] and surface.enclosed_volume() == 4.0
+    np.testing.assert_array_equal(surface.bounds[0], [1.0, 0.0])
+    with pytest.raises(GeometryError, match="loops 0 and 1 cross each other"):
+        polygon_surface([square, [[0.5, 0.5], [2, 0.5], [2, 2], [0.5, 2]]])
+    with pytest.raises(GeometryError, match="loop 0 is not a simple closed curve"):
+        polygon_surface([[[0, 0], [2, 2], [2, 0], [0, 1]]])
+    with pytest.raises(GeometryError, match="loop 0 encloses no area"):
+        polygon_surface([[[0, 0], [1, 1], [2, 2]]])
+    with pytest.raises(GeometryError, match="loop 1 has 1 points with non-finite"):
+        polygon_surface([square, [[0.2, 0.2], [0.4, np.nan], [0.3, 0.4]]])
+
+
+_SVG = """<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+<path d="M 0 0 L 4 0 L 4 3 L 0 3 Z"/>
+<path d="M 1 1.5 A 1 1 0 1 0 3 1.5 A 1 1 0 1 0 1 1.5 Z"/>
+<path d="M 6 6 L 7 7"/>
+</svg>"""
+
+
+@pytest.mark.parametrize("file_type", ["svg", "dxf"])
+def test_drawing_with_rectangle_and_circular_hole(tmp_path, file_type):
+    data = _SVG.encode()
+    if file_type == "dxf":
+        data = export_dxf(trimesh.load_path(io.BytesIO(data), file_type="svg")).encode()
+    path = tmp_path / f"plate.{file_type}"
+    path.write_bytes(data)
+    surface = load_surface(path, dimension=2)
+    circle = surface.faces[4:]
+    n = len(circle)
+    # The circle is a regular polygon inscribed in radius 1: its area is n/2 sin(2 pi / n).
+    assert _loop_area(surface.vertices, circle) == pytest.approx(-n / 2 * np.sin(2 * np.pi / n), rel=1e-12)
+    assert surface.enclosed_volume() == pytest.approx(12.0 - n / 2 * np.sin(2 * np.pi / n), rel=1e-13)
+    assert 12.0 - np.pi < surface.enclosed_volume() < 12.0 - np.pi + np.pi * (2 * np.pi / n) ** 2 / 6
+    assert surface.warnings[-1] == (
+        "reversed 1 of 2 loops so that outer boundaries run counter-clockwise and holes clockwise"
+    )
+    if file_type == "svg":
+        assert surface.warnings[0] == "ignored 1 open curves of the drawing"
