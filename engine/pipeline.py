@@ -21,7 +21,8 @@ from schemas import JobSpec, parse_job
 from .errors import GeometryError, GridError, MethodUnavailableError
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.fractions import VolumeFractions, control_offsets, volume_fractions
-from .geometry.loading import load_surface, polygon_surface
+from .geometry.loading import load_surface
+from .geometry.polygon import polygon_surface
 from .geometry.surface import Surface
 from .grid import Grid, make_grid
 from .output import FieldData, Result, SolverReport

@@ -19,9 +19,8 @@ Every step that changed something leaves a warning with its numbers in ``Surface
 A surface that is still open is returned with ``closed=False``: inside tests then use the
 generalized winding number (``engine.geometry.winding``).
 
-2D: closed curves of an SVG/DXF drawing (``trimesh.load_path``) or explicit vertex loops
-(``polygon_surface``) -> oriented segments, outer boundaries counter-clockwise, holes clockwise.
-SVG coordinates are used as written (y pointing down on screen).
+2D (``dimension=2``): an SVG/DXF drawing is handed to ``engine.geometry.polygon``, which turns
+its closed curves into oriented segments.
 
 Placement: ``x' = R (scale * x) + t`` -- the uniform scale first, then the rigid transform
 (``transform`` = [[R, t], [0, 1]], 4x4 in 3D and 3x3 in 2D; R orthogonal).
@@ -34,7 +33,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-import shapely
 import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_tree, connected_components
@@ -42,15 +40,13 @@ from trimesh.exchange.load import compressed_loaders, mesh_formats, path_formats
 from trimesh.resolvers import FilePathResolver
 
 from engine.errors import GeometryError
+from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, place
+from engine.geometry.polygon import polygon_surface, read_drawing
 from engine.geometry.surface import Surface
 from engine.geometry.winding import winding_number
 
 MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
 
-# Relative tolerances: orthogonality of a transform's linear part, and the enclosed volume
-# (area) below which a surface counts as flat, relative to its bounding-box extent^d.
-_RIGID_TOL = 1e-9
-_FLAT_TOL = 1e-12
 _COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D"
 
 
@@ -81,7 +77,7 @@ def load_surface(
     else:
         name, data, file_type, resolver = _resolve_source(source, filename)
         if dimension == 2:
-            loops, notes = _read_drawing(name, data, file_type)
+            loops, notes = read_drawing(name, data, file_type)
             surface = polygon_surface(loops, scale=scale, transform=transform, name=name)
             surface.warnings[:0] = notes
             return surface
@@ -113,7 +109,7 @@ def mesh_surface(
     Steps and warnings as in the module docstring; ``name`` labels error messages.
     """
     vertices, faces = _checked_arrays(vertices, faces, name)
-    vertices, mirrored = _place(vertices, scale, transform, name)
+    vertices, mirrored = place(vertices, scale, transform, name)
     warnings: list[str] = []
     if mirrored:
         faces = faces[:, ::-1]
@@ -128,7 +124,7 @@ def mesh_surface(
     faces = _orient_consistently(faces, len(vertices), warnings)
     faces = _orient_by_nesting(vertices, faces, warnings)
     surface = Surface(vertices=vertices, faces=faces, closed=True, warnings=warnings)
-    _check_volume(surface, name)
+    check_volume(surface, name)
     boundary, conflicts = _open_edges(faces, len(vertices))
     if boundary or conflicts:
         surface.closed = False
@@ -143,44 +139,6 @@ def mesh_surface(
             f"the surface is not closed: {'; '.join(problems)};"
             " inside tests use the generalized winding number"
         )
-    return surface
-
-
-def polygon_surface(
-    loops: list,
-    *,
-    scale: float = 1.0,
-    transform: np.ndarray | None = None,
-    name: str = "polygon",
-) -> Surface:
-    """A planar solid from closed vertex loops: each loop [p, 2] [m], first point not repeated
-    (a repeated closing point is dropped). Loops nested in an odd number of others are holes,
-    whatever their given orientation; each loop is reoriented so the solid is on the left of
-    every segment (outer counter-clockwise, holes clockwise). Vertex order is kept: a reversed
-    loop keeps its vertices and swaps its segments' ends.
-    """
-    if len(loops) == 0:
-        raise GeometryError(f"polygon '{name}' has no loops")
-    warnings: list[str] = []
-    clean = [_clean_loop(loop, i, name, warnings) for i, loop in enumerate(loops)]
-    points, _ = _place(np.concatenate(clean), scale, transform, name)  # orientation fixed below
-    offsets = np.cumsum([0] + [len(c) for c in clean])
-    clean = [points[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
-    faces, reversed_count = [], 0
-    for loop, start, depth in zip(clean, offsets, _loop_depths(clean, name)):
-        idx = start + np.arange(len(loop))
-        segments = np.stack([idx, np.roll(idx, -1)], axis=1)
-        if (_signed_area(loop) > 0) != (depth % 2 == 0):
-            segments = segments[:, ::-1]
-            reversed_count += 1
-        faces.append(segments)
-    if reversed_count:
-        warnings.append(
-            f"reversed {reversed_count} of {len(clean)} loops so that outer boundaries run"
-            " counter-clockwise and holes clockwise"
-        )
-    surface = Surface(points, np.concatenate(faces).astype(np.int64), True, warnings)
-    _check_volume(surface, name)
     return surface
 
 
@@ -225,7 +183,7 @@ def _read_scene(name: str, data: bytes, file_type: str, resolver) -> trimesh.Sce
             io.BytesIO(data), file_type=file_type, resolver=resolver, process=False, **extra
         )
     except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
-        raise GeometryError(f"cannot read mesh '{name}': {_describe(exc)}") from None
+        raise GeometryError(f"cannot read mesh '{name}': {describe_error(exc)}") from None
 
 
 def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -257,34 +215,7 @@ def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[s
     return np.concatenate(vertices), np.concatenate(faces), notes
 
 
-def _read_drawing(name: str, data: bytes, file_type: str) -> tuple[list[np.ndarray], list[str]]:
-    """Closed curves of an SVG/DXF drawing, discretised by trimesh: ([p, 2] loops, notes)."""
-    if file_type not in path_formats():
-        raise GeometryError(f"cannot read drawing '{name}': dimension 2 needs an SVG or DXF file")
-    try:
-        path = trimesh.load_path(io.BytesIO(data), file_type=file_type)
-        loops = [np.asarray(d, dtype=np.float64) for d in path.discrete]
-        dangling = len(path.dangling)
-    except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
-        raise GeometryError(f"cannot read drawing '{name}': {_describe(exc)}") from None
-    if not loops:
-        raise GeometryError(f"drawing '{name}' contains no closed curves")
-    if loops[0].shape[1] == 3:
-        z = np.concatenate(loops)[:, 2]
-        if np.ptp(z) > _RIGID_TOL * max(1.0, np.abs(z).max()):
-            raise GeometryError(f"drawing '{name}' is not planar (z varies by {np.ptp(z):.3g})")
-        loops = [loop[:, :2] for loop in loops]
-    return loops, [f"ignored {dangling} open curves of the drawing"] if dangling else []
-
-
-def _describe(exc: Exception) -> str:
-    lines = str(exc).strip().splitlines()
-    text = lines[0] if lines else ""
-    text = text if len(text) <= 200 else text[:197] + "..."
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-# --- validation and placement -----------------------------------------------------------------
+# --- validation ---------------------------------------------------------------------------------
 
 
 def _checked_arrays(vertices, faces, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -321,51 +252,6 @@ def _require_faces(faces: np.ndarray, name: str) -> np.ndarray:
             " and cancelling faces"
         )
     return faces
-
-
-def _place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.ndarray, bool]:
-    """x' = R (scale x) + t; returns (points [m, d], whether R mirrors)."""
-    d = points.shape[1]
-    if not (isinstance(scale, (int, float, np.number)) and np.isfinite(scale) and scale > 0):
-        raise GeometryError(f"'{name}': scale must be a finite number > 0, got {scale!r}")
-    points = points * float(scale)
-    mirrored = False
-    if transform is not None:
-        try:
-            m = np.array(transform, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise GeometryError(f"'{name}': transform must be a numeric [{d + 1}, {d + 1}] matrix") from None
-        if m.shape != (d + 1, d + 1) or not np.isfinite(m).all():
-            raise GeometryError(
-                f"'{name}': transform must be a finite [{d + 1}, {d + 1}] homogeneous matrix,"
-                f" got shape {list(m.shape)}"
-            )
-        r, t = m[:d, :d], m[:d, d]
-        if np.any(m[d] != np.eye(d + 1)[d]) or np.abs(r.T @ r - np.eye(d)).max() > _RIGID_TOL:
-            raise GeometryError(
-                f"'{name}': transform must be rigid: [[R, t], [0, 1]] with R orthogonal"
-                " (use scale for resizing)"
-            )
-        points = points @ r.T + t
-        mirrored = bool(np.linalg.det(r) < 0)
-    if not np.isfinite(points).all():
-        raise GeometryError(f"'{name}': coordinates overflow after scaling by {scale!r}")
-    return points, mirrored
-
-
-def _check_volume(surface: Surface, name: str) -> None:
-    lo, hi = surface.bounds
-    extent = hi - lo
-    # About the centre of the bounds: the same for closed surfaces, and for open ones a
-    # measure that does not grow with the distance to the origin (a flat sheet gives 0).
-    volume = Surface(surface.vertices - (lo + hi) / 2, surface.faces).enclosed_volume()
-    what = "volume" if surface.dim == 3 else "area"
-    if volume > _FLAT_TOL * float(extent.max()) ** surface.dim:
-        return
-    if extent.min() <= _FLAT_TOL * extent.max():
-        axis = "xyz"[int(np.argmin(extent))]
-        raise GeometryError(f"'{name}' encloses no {what}: it is flat (zero extent along {axis})")
-    raise GeometryError(f"'{name}' encloses no {what}: the enclosed {what} is {volume:.6g} after repair")
 
 
 # --- 3D repair ----------------------------------------------------------------------------------
@@ -571,7 +457,7 @@ def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[s
         inner = inner[inner != s]
         if len(inner):
             depth[inner] += np.abs(winding_number(vertices, faces[members[s]], probe[inner])) > 0.5
-    flat = np.abs(volume) <= _FLAT_TOL * (upper - lower).max(axis=1) ** 3
+    flat = np.abs(volume) <= FLAT_TOL * (upper - lower).max(axis=1) ** 3
     wrong = ~flat & ((volume > 0) != (depth % 2 == 0))
     if not wrong.any():
         return faces
@@ -587,58 +473,3 @@ def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[s
             f" and cavities inward (enclosed volume {volume.sum():.6g} -> {after:.6g})"
         )
     return faces
-
-
-# --- 2D polygons ---------------------------------------------------------------------------------
-
-
-def _clean_loop(loop, i: int, name: str, warnings: list[str]) -> np.ndarray:
-    try:
-        p = np.array(loop, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise GeometryError(f"polygon '{name}': loop {i} must be a list of [x, y] points") from None
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise GeometryError(f"polygon '{name}': loop {i} must have shape [p, 2], got {list(p.shape)}")
-    bad = int((~np.isfinite(p).all(axis=1)).sum())
-    if bad:
-        raise GeometryError(
-            f"polygon '{name}': loop {i} has {bad} points with non-finite coordinates (NaN or infinity)"
-        )
-    repeat = np.all(p == np.roll(p, -1, axis=0), axis=1)
-    if repeat.any() and len(p) > 1:
-        # The closing copy of the first point is expected; other repeats are zero-length segments.
-        extra = int(repeat.sum()) - int(repeat[-1])
-        if extra:
-            warnings.append(f"loop {i}: removed {extra} repeated consecutive points")
-        p = p[~repeat]
-    if len(p) < 3 or _signed_area(p) == 0.0:
-        raise GeometryError(f"polygon '{name}': loop {i} encloses no area ({len(p)} distinct points)")
-    return p
-
-
-def _signed_area(loop: np.ndarray) -> float:
-    x, y = loop[:, 0], loop[:, 1]
-    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def _loop_depths(loops: list[np.ndarray], name: str) -> np.ndarray:
-    """How many other loops enclose each loop; loops must not cross themselves or each other."""
-    polygons = [shapely.Polygon(p) for p in loops]
-    for i, polygon in enumerate(polygons):
-        if not polygon.is_valid:
-            reason = shapely.is_valid_reason(polygon)
-            raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve ({reason})")
-    depth = np.zeros(len(loops), dtype=np.int64)
-    for i, j in shapely.STRtree(polygons).query(polygons).T:  # pairs with overlapping boxes
-        if i >= j:
-            continue
-        a, b = polygons[i], polygons[j]
-        if a.equals(b):
-            raise GeometryError(f"polygon '{name}': loops {i} and {j} coincide")
-        if b.contains(a):
-            depth[i] += 1
-        elif a.contains(b):
-            depth[j] += 1
-        elif a.overlaps(b) or a.boundary.crosses(b.boundary):
-            raise GeometryError(f"polygon '{name}': loops {i} and {j} cross each other")
-    return depth

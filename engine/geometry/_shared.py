@@ -1,0 +1,73 @@
+"""Placement and sanity checks shared by 3D meshes (``loading``) and 2D polygons (``polygon``).
+
+Kept apart from both so that ``loading`` can dispatch to ``polygon`` without a circular import.
+Placement: ``x' = R (scale * x) + t`` -- the uniform scale first, then the rigid transform
+(``transform`` = [[R, t], [0, 1]], 4x4 in 3D and 3x3 in 2D; R orthogonal).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.errors import GeometryError
+from engine.geometry.surface import Surface
+
+# Relative tolerances: orthogonality of a transform's linear part (also the planarity of a
+# drawing), and the enclosed volume (area) below which a surface counts as flat, relative to
+# its bounding-box extent^d.
+RIGID_TOL = 1e-9
+FLAT_TOL = 1e-12
+
+
+def place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.ndarray, bool]:
+    """x' = R (scale x) + t; returns (points [m, d], whether R mirrors)."""
+    d = points.shape[1]
+    if not (isinstance(scale, (int, float, np.number)) and np.isfinite(scale) and scale > 0):
+        raise GeometryError(f"'{name}': scale must be a finite number > 0, got {scale!r}")
+    points = points * float(scale)
+    mirrored = False
+    if transform is not None:
+        try:
+            m = np.array(transform, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise GeometryError(f"'{name}': transform must be a numeric [{d + 1}, {d + 1}] matrix") from None
+        if m.shape != (d + 1, d + 1) or not np.isfinite(m).all():
+            raise GeometryError(
+                f"'{name}': transform must be a finite [{d + 1}, {d + 1}] homogeneous matrix,"
+                f" got shape {list(m.shape)}"
+            )
+        r, t = m[:d, :d], m[:d, d]
+        if np.any(m[d] != np.eye(d + 1)[d]) or np.abs(r.T @ r - np.eye(d)).max() > RIGID_TOL:
+            raise GeometryError(
+                f"'{name}': transform must be rigid: [[R, t], [0, 1]] with R orthogonal"
+                " (use scale for resizing)"
+            )
+        points = points @ r.T + t
+        mirrored = bool(np.linalg.det(r) < 0)
+    if not np.isfinite(points).all():
+        raise GeometryError(f"'{name}': coordinates overflow after scaling by {scale!r}")
+    return points, mirrored
+
+
+def check_volume(surface: Surface, name: str) -> None:
+    """Raise ``GeometryError`` if the surface encloses no volume (3D) or area (2D)."""
+    lo, hi = surface.bounds
+    extent = hi - lo
+    # About the centre of the bounds: the same for closed surfaces, and for open ones a
+    # measure that does not grow with the distance to the origin (a flat sheet gives 0).
+    volume = Surface(surface.vertices - (lo + hi) / 2, surface.faces).enclosed_volume()
+    what = "volume" if surface.dim == 3 else "area"
+    if volume > FLAT_TOL * float(extent.max()) ** surface.dim:
+        return
+    if extent.min() <= FLAT_TOL * extent.max():
+        axis = "xyz"[int(np.argmin(extent))]
+        raise GeometryError(f"'{name}' encloses no {what}: it is flat (zero extent along {axis})")
+    raise GeometryError(f"'{name}' encloses no {what}: the enclosed {what} is {volume:.6g} after repair")
+
+
+def describe_error(exc: Exception) -> str:
+    """A file reader's exception as one short line for a ``GeometryError`` message."""
+    lines = str(exc).strip().splitlines()
+    text = lines[0] if lines else ""
+    text = text if len(text) <= 200 else text[:197] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

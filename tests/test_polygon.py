@@ -1,0 +1,84 @@
+"""Planar solids from vertex loops and SVG/DXF drawings (engine.geometry.polygon)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+import trimesh
+from trimesh.path.exchange.dxf import export_dxf
+
+from engine.errors import GeometryError
+from engine.geometry.loading import load_surface
+from engine.geometry.polygon import polygon_surface
+from engine.geometry.winding import winding_number
+
+
+def _loop_area(vertices: np.ndarray, segments: np.ndarray) -> float:
+    p = vertices[segments]
+    return float((p[:, 0, 0] * p[:, 1, 1] - p[:, 1, 0] * p[:, 0, 1]).sum() / 2.0)
+
+
+def test_polygon_with_a_hole_is_oriented():
+    outer = [[0, 0], [0, 4], [4, 4], [4, 0]]  # clockwise: must be reversed
+    hole = [[1, 1], [3, 1], [3, 3], [1, 3]]  # counter-clockwise: must be reversed
+    island = [[1.5, 1.5], [2.5, 1.5], [2.5, 2.5], [1.5, 2.5], [1.5, 1.5]]  # closing point repeated
+    surface = polygon_surface([outer, hole, island])
+    assert surface.warnings == [
+        "reversed 2 of 3 loops so that outer boundaries run counter-clockwise and holes clockwise"
+    ]
+    assert surface.enclosed_volume() == 16.0 - 4.0 + 1.0
+    # Vertex order kept; the island's repeated closing point dropped.
+    np.testing.assert_array_equal(surface.vertices[:8], np.array(outer + hole, dtype=float))
+    assert len(surface.vertices) == 12
+    assert _loop_area(surface.vertices, surface.faces[:4]) == 16.0
+    assert _loop_area(surface.vertices, surface.faces[4:8]) == -4.0
+    assert _loop_area(surface.vertices, surface.faces[8:]) == 1.0
+    probes = np.array([[0.5, 0.5], [1.2, 2.0], [2.0, 2.0], [5.0, 0.0]])
+    w = winding_number(surface.vertices, surface.faces, probes)
+    np.testing.assert_allclose(w, [1, 0, 1, 0], atol=1e-14)
+
+
+def test_polygon_placement_and_errors():
+    square = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    turn = np.array([[0.0, -1.0, 3.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    surface = polygon_surface([square], scale=2.0, transform=turn)
+    assert surface.warnings == [] and surface.enclosed_volume() == 4.0
+    np.testing.assert_array_equal(surface.bounds[0], [1.0, 0.0])
+    with pytest.raises(GeometryError, match="loops 0 and 1 cross each other"):
+        polygon_surface([square, [[0.5, 0.5], [2, 0.5], [2, 2], [0.5, 2]]])
+    with pytest.raises(GeometryError, match="loop 0 is not a simple closed curve"):
+        polygon_surface([[[0, 0], [2, 2], [2, 0], [0, 1]]])
+    with pytest.raises(GeometryError, match="loop 0 encloses no area"):
+        polygon_surface([[[0, 0], [1, 1], [2, 2]]])
+    with pytest.raises(GeometryError, match="loop 1 has 1 points with non-finite"):
+        polygon_surface([square, [[0.2, 0.2], [0.4, np.nan], [0.3, 0.4]]])
+
+
+_SVG = """<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+<path d="M 0 0 L 4 0 L 4 3 L 0 3 Z"/>
+<path d="M 1 1.5 A 1 1 0 1 0 3 1.5 A 1 1 0 1 0 1 1.5 Z"/>
+<path d="M 6 6 L 7 7"/>
+</svg>"""
+
+
+@pytest.mark.parametrize("file_type", ["svg", "dxf"])
+def test_drawing_with_rectangle_and_circular_hole(tmp_path, file_type):
+    data = _SVG.encode()
+    if file_type == "dxf":
+        data = export_dxf(trimesh.load_path(io.BytesIO(data), file_type="svg")).encode()
+    path = tmp_path / f"plate.{file_type}"
+    path.write_bytes(data)
+    surface = load_surface(path, dimension=2)
+    circle = surface.faces[4:]
+    n = len(circle)
+    # The circle is a regular polygon inscribed in radius 1: its area is n/2 sin(2 pi / n).
+    assert _loop_area(surface.vertices, circle) == pytest.approx(-n / 2 * np.sin(2 * np.pi / n), rel=1e-12)
+    assert surface.enclosed_volume() == pytest.approx(12.0 - n / 2 * np.sin(2 * np.pi / n), rel=1e-13)
+    assert 12.0 - np.pi < surface.enclosed_volume() < 12.0 - np.pi + np.pi * (2 * np.pi / n) ** 2 / 6
+    assert surface.warnings[-1] == (
+        "reversed 1 of 2 loops so that outer boundaries run counter-clockwise and holes clockwise"
+    )
+    if file_type == "svg":
+        assert surface.warnings[0] == "ignored 1 open curves of the drawing"
