@@ -181,18 +181,18 @@ def _control_sums(
     between the offsets that agree on them; x comes last because it needs the carry.
     """
     d = volume.ndim
+    # cache[tail]: (slab, carry) pair-summed along the trailing axes d - len(tail) .. d - 1 with shifts tail
     cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {(): (volume, carry)}
-
-    def reduced(tail: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-        # tail: shifts of the trailing axes d - len(tail) .. d - 1
-        if tail not in cache:
-            axis = d - len(tail)
-            a, c = reduced(tail[1:])
-            cache[tail] = (_pair_sums(a, axis, bool(tail[0])), _pair_sums(c, axis, bool(tail[0])))
-        return cache[tail]
+    for s in offsets:
+        for length in range(1, d):
+            tail = s[d - length :]
+            if tail not in cache:
+                a, c = cache[tail[1:]]
+                axis = d - length
+                cache[tail] = (_pair_sums(a, axis, bool(tail[0])), _pair_sums(c, axis, bool(tail[0])))
 
     out = {}
     for s in offsets:
-        a, c = reduced(s[1:])
+        a, c = cache[s[1:]]
         out[s] = _pair_sums(a, 0, bool(s[0]), c if s[0] else None)
     return out
