@@ -1,0 +1,264 @@
+"""Hex slicing for DG: exact pieces, interfaces and boundary of solids cut by the grid."""
+
+from __future__ import annotations
+
+import itertools
+
+import manifold3d
+import numpy as np
+import pytest
+import trimesh
+
+from engine.errors import GeometryError
+from engine.geometry.moments import (
+    box_moments,
+    cell_face_moments,
+    cell_moments,
+    interval_moments,
+    shift_moments,
+    volume_moments,
+)
+from engine.geometry.slicing import CutCells, slice_cells
+from engine.geometry.surface import Surface
+from engine.grid import Grid
+
+DEGREE = 4
+
+
+def _surface(solid) -> Surface:
+    if isinstance(solid, manifold3d.Manifold):
+        mesh = solid.to_mesh64()
+        return Surface(np.array(mesh.vert_properties[:, :3]), np.array(mesh.tri_verts, dtype=np.int64))
+    return Surface(np.asarray(solid.vertices, dtype=float), np.asarray(solid.faces, dtype=np.int64))
+
+
+def _box(lower, upper) -> manifold3d.Manifold:
+    lower = np.asarray(lower, dtype=float)
+    return manifold3d.Manifold.cube(np.asarray(upper, dtype=float) - lower).translate(lower)
+
+
+def _closure_error(cut: CutCells) -> float:
+    """max over pieces of |sum of outward area vectors| / h^2 (interfaces + boundary triangles)."""
+    total = np.zeros((cut.num_pieces, 3))
+    unit = np.eye(3)[cut.face_axis] * cut.face_area[:, None]
+    np.add.at(total, cut.face_minus, unit)
+    np.add.at(total, cut.face_plus, -unit)
+    t = cut.boundary_triangles
+    np.add.at(total, cut.boundary_piece, 0.5 * np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
+    return float(np.abs(total).max() / cut.grid.spacing**2)
+
+
+def _boundary_area(cut: CutCells) -> float:
+    t = cut.boundary_triangles
+    return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
+
+
+def _check_invariants(cut: CutCells) -> None:
+    assert cut.exponents.shape == (35, 3) and cut.moments.shape == (cut.num_pieces, 35)
+    assert np.all(np.diff(cut.boundary_piece) >= 0)
+    assert np.all(cut.face_area > 0) and np.all(cut.volume > 0)
+    np.testing.assert_allclose(cut.volume, cut.moments[:, 0] * cut.grid.spacing**3, rtol=1e-15)
+    assert np.all(cut.moments[cut.full] == cell_moments(DEGREE))
+    # Interfaces join face neighbours: the plus piece's cell is the minus piece's cell + e_axis.
+    step = cut.piece_cell[cut.face_plus] - cut.piece_cell[cut.face_minus]
+    np.testing.assert_array_equal(step, np.eye(3, dtype=int)[cut.face_axis])
+    assert _closure_error(cut) < 1e-12
+
+
+def test_box_in_general_position_gives_exact_pieces():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(6, 5, 4))
+    lower, upper = np.array([0.3, 1.2, 0.5]), np.array([4.6, 3.5, 2.25])
+    cut = slice_cells(_surface(_box(lower, upper)), grid, DEGREE)
+    _check_invariants(cut)
+    ranges = [range(int(np.floor(lower[a])), int(np.ceil(upper[a]))) for a in range(3)]
+    cells = list(itertools.product(*ranges))
+    assert cut.num_pieces == len(cells) == 5 * 3 * 3
+    assert cut.warnings == []
+    for p, cell in enumerate(cells):  # C order, as the pieces are sorted by linear cell index
+        assert tuple(cut.piece_cell[p]) == cell
+        lo = np.maximum(lower, cell) - (np.asarray(cell) + 0.5)
+        hi = np.minimum(upper, np.asarray(cell) + 1) - (np.asarray(cell) + 0.5)
+        ref = box_moments(lo, hi, DEGREE)
+        assert cut.full[p] == bool(np.all(hi - lo == 1.0))
+        np.testing.assert_allclose(cut.moments[p], ref, rtol=0, atol=1e-13)
+        assert cut.volume[p] == pytest.approx(np.prod(hi - lo), rel=1e-13)
+    assert cut.full.sum() == 3 * 1 * 1
+    assert _boundary_area(cut) == pytest.approx(2 * (4.3 * 2.3 + 4.3 * 1.75 + 2.3 * 1.75), rel=1e-13)
+    # Interfaces: 4 x-planes x 3 x 3 + 5 x 2 x 3 + 5 x 3 x 2 cell faces, areas = overlap rectangles.
+    assert cut.num_faces == 4 * 9 + 2 * 15 + 2 * 15
+    full_full = cut.full[cut.face_minus] & cut.full[cut.face_plus]
+    assert full_full.sum() == 2 and np.all(cut.face_area[full_full] == 1.0)
+    np.testing.assert_array_equal(cut.face_moments[full_full], cell_face_moments(DEGREE)[cut.face_axis[full_full]])
+    x_faces = cut.face_axis == 0
+    assert cut.face_area[x_faces].sum() == pytest.approx(4 * 2.3 * 1.75, rel=1e-13)
+
+
+def test_icosphere_pieces_sum_to_the_mesh():
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    surface = _surface(sphere)
+    mesh_volume = sphere.volume
+    for n, origin in ((8, (-1.07, -1.11, -1.13)), (13, (-1.2, -1.05, -1.17))):
+        h = 2.3 / n
+        grid = Grid(origin=origin, spacing=h, shape=(n, n, n))
+        stats: dict = {}
+        cut = slice_cells(surface, grid, DEGREE, stats=stats)
+        _check_invariants(cut)
+        assert cut.warnings == [] and stats["faces_resolved_2d"] == 0  # both sides matched directly
+        assert abs(cut.volume.sum() / mesh_volume - 1) < 1e-12
+        # Moments of all pieces, moved to one centre, equal the whole mesh's moments there.
+        centre = np.array([0.1, -0.2, 0.05])
+        moved = shift_moments(cut.moments, DEGREE, (centre - cut.piece_centers()) / h).sum(axis=0)
+        whole = volume_moments(sphere.vertices, sphere.faces, DEGREE, centre, h)
+        np.testing.assert_allclose(moved, whole, rtol=0, atol=1e-10 * np.abs(whole).max())
+        assert _boundary_area(cut) == pytest.approx(sphere.area, rel=1e-12)
+        full_full = cut.full[cut.face_minus] & cut.full[cut.face_plus]
+        assert full_full.any() and np.all(cut.face_area[full_full] == h**2)
+        # Every grid face inside the sphere is an interface: a full cell has 6 neighbours.
+        neighbours = np.bincount(np.r_[cut.face_minus, cut.face_plus], minlength=cut.num_pieces)
+        assert np.all(neighbours[cut.full] == 6)
+        assert not np.any(np.isin(np.flatnonzero(cut.full), cut.boundary_piece))
+
+
+def test_two_thin_plates_in_one_cell_row_stay_apart():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(6, 6, 5))
+    # Both plates lie in the cell layer z in [2, 3], 0.3 h apart, across a 4 x 4 block of cells.
+    lower_plate, upper_plate = _box([1.25, 1.25, 2.1], [4.75, 4.75, 2.3]), _box([1.25, 1.25, 2.6], [4.75, 4.75, 2.8])
+    stats: dict = {}
+    cut = slice_cells(_surface(lower_plate + upper_plate), grid, DEGREE, stats=stats)
+    _check_invariants(cut)
+    assert stats["faces_resolved_2d"] == 0  # two components per side, paired by their moments
+    assert cut.num_pieces == 2 * 16 and not cut.full.any()
+    counts = np.unique(grid.linear_index(cut.piece_cell), return_counts=True)[1]
+    assert np.all(counts == 2)
+    z_centroid = cut.moments[:, 3] / cut.moments[:, 0]  # xi_z of each piece's centroid
+    upper = z_centroid > 0
+    assert upper.sum() == 16
+    # Interfaces only along each plate (x and y faces), never across the 0.3 h gap.
+    assert np.all(upper[cut.face_minus] == upper[cut.face_plus]) and not np.any(cut.face_axis == 2)
+    assert cut.num_faces == 2 * (3 * 4 + 4 * 3)
+    np.testing.assert_allclose(np.sort(np.unique(np.round(cut.face_area, 12))), [0.15, 0.2])
+    assert cut.volume.sum() == pytest.approx(2 * 3.5 * 3.5 * 0.2, rel=1e-13)
+
+
+def test_box_on_grid_planes_exposes_full_cell_faces():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=0.5, shape=(6, 6, 6))
+    cut = slice_cells(_surface(_box([0.5, 0.5, 1.0], [2.0, 1.5, 1.5])), grid, DEGREE)
+    _check_invariants(cut)
+    assert cut.num_pieces == 3 * 2 * 1 and cut.full.all() and cut.warnings == []
+    assert cut.num_faces == 2 * 2 + 3 * 1
+    assert _boundary_area(cut) == pytest.approx(2 * (1.5 * 1.0 + 1.5 * 0.5 + 1.0 * 0.5), rel=1e-14)
+    assert len(cut.boundary_triangles) == 2 * (2 * 3 + 2 * 6 + 2 * 2)  # two triangles per exposed cell face
+
+
+def test_surface_partly_in_a_grid_plane_splits_the_face():
+    # An L-shaped solid: the top of the lower slab (z = 2) is a grid plane; over x in [1.7, 3.5]
+    # it is surface, over x in [0.5, 1.7] it is shared with the upper block.
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(5, 5, 5))
+    solid = _box([0.5, 0.5, 1.0], [3.5, 3.5, 2.0]) + _box([0.5, 0.5, 2.0], [1.7, 3.5, 3.0])
+    stats: dict = {}
+    cut = slice_cells(_surface(solid), grid, DEGREE, stats=stats)
+    _check_invariants(cut)
+    assert stats["faces_resolved_2d"] == 4  # z = 2 above cells x = 1, y = 0..3: part interface, part surface
+    assert cut.volume.sum() == pytest.approx(3 * 3 * 1 + 1.2 * 3 * 1, rel=1e-13)
+    assert _boundary_area(cut) == pytest.approx(solid.surface_area(), rel=1e-13)
+    assert cut.full.sum() == 4  # cells (1..2, 1..2, 1) of the slab
+    z_faces = cut.face_axis == 2
+    assert cut.face_area[z_faces].sum() == pytest.approx(1.2 * 3, rel=1e-13)
+    # The z-interface above full cell (1, 1, 1) covers x in [1, 1.7]: area 0.7, xi_x in [-1/2, 0.2].
+    above = z_faces & np.all(cut.piece_cell[cut.face_minus] == [1, 1, 1], axis=1)
+    assert above.sum() == 1
+    assert cut.face_area[above][0] == pytest.approx(0.7, rel=1e-13)
+    exps = cut.exponents
+    mx, my = interval_moments(-0.5, 0.2, DEGREE), interval_moments(-0.5, 0.5, DEGREE)
+    ref = mx[exps[:, 0]] * my[exps[:, 1]] * 0.5 ** exps[:, 2]
+    np.testing.assert_allclose(cut.face_moments[above][0], ref, rtol=0, atol=1e-13)
+    surface_of_full = np.isin(cut.boundary_piece, np.flatnonzero(cut.full))
+    assert surface_of_full.any()
+
+
+def test_void_inside_one_cell_stays_with_its_piece():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(6, 6, 6))
+    void = manifold3d.Manifold.sphere(0.3, 24).translate([2.5, 2.5, 2.5])
+    solid = _box([1, 1, 1], [5, 5, 5]) - void
+    cut = slice_cells(_surface(solid), grid, DEGREE)
+    _check_invariants(cut)
+    assert cut.num_pieces == 64 and cut.full.sum() == 63
+    holed = np.flatnonzero(~cut.full)
+    assert tuple(cut.piece_cell[holed[0]]) == (2, 2, 2)
+    assert cut.volume[holed[0]] == pytest.approx(1 - void.volume(), rel=1e-13)
+    assert _boundary_area(cut) == pytest.approx(solid.surface_area(), rel=1e-13)
+
+
+def test_hollow_sphere_inner_shell_bounds_the_pieces():
+    outer = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    inner = trimesh.creation.icosphere(subdivisions=2, radius=0.55)
+    vertices = np.concatenate([outer.vertices, inner.vertices])
+    faces = np.concatenate([outer.faces, inner.faces[:, ::-1] + len(outer.vertices)])  # inner faces inward
+    grid = Grid(origin=(-1.1, -1.1, -1.1), spacing=0.22, shape=(10, 10, 10))
+    cut = slice_cells(Surface(vertices, faces), grid, DEGREE)
+    _check_invariants(cut)
+    assert abs(cut.volume.sum() / (outer.volume - inner.volume) - 1) < 1e-12
+    assert _boundary_area(cut) == pytest.approx(outer.area + inner.area, rel=1e-12)
+    centres = cut.piece_centers()
+    assert not np.any(cut.full & (np.linalg.norm(centres, axis=1) < 0.55 - 0.22 * np.sqrt(3) / 2))
+
+
+def test_two_bodies_in_one_cell_are_two_pieces():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(3, 3, 3))
+    a = manifold3d.Manifold.sphere(0.2, 16).translate([1.3, 1.3, 1.3])
+    b = manifold3d.Manifold.sphere(0.15, 16).translate([1.7, 1.7, 1.7])
+    cut = slice_cells(_surface(a + b), grid, DEGREE)
+    _check_invariants(cut)
+    assert cut.num_pieces == 2 and cut.num_faces == 0
+    np.testing.assert_array_equal(cut.piece_cell, [[1, 1, 1], [1, 1, 1]])
+    np.testing.assert_allclose(cut.volume, [a.volume(), b.volume()], rtol=1e-13)  # largest first
+
+
+def test_translating_a_box_keeps_its_volume():
+    grid = Grid(origin=(-1.0, -1.0, -1.0), spacing=0.25, shape=(12, 12, 12))
+    for shift in ((0.0, 0.0, 0.0), (0.01, 0.13, 0.07), (0.125, 0.2, 0.249), (1 / 3, 1 / 7, 1 / 11)):
+        solid = _box([-0.61, -0.43, -0.52], [0.57, 0.34, 0.46]).translate(shift)
+        cut = slice_cells(_surface(solid), grid, DEGREE)
+        assert abs(cut.volume.sum() / (1.18 * 0.77 * 0.98) - 1) < 1e-12
+        assert _closure_error(cut) < 1e-12
+
+
+def test_surface_outside_the_grid_is_clipped_with_a_warning():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(3, 3, 3))
+    cut = slice_cells(_surface(_box([1.5, 1.5, 1.5], [3.5, 2.5, 2.5])), grid, DEGREE)
+    assert cut.volume.sum() == pytest.approx(1.5, rel=1e-13)
+    assert cut.warnings == ["the surface extends outside the grid; 25% of its volume outside the grid box was dropped"]
+    assert _closure_error(cut) < 1e-12  # the cut at the grid's edge is boundary
+
+
+def test_parallel_workers_give_the_same_pieces():
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    grid = Grid(origin=(-1.1, -1.1, -1.1), spacing=0.2, shape=(11, 11, 11))
+    serial = slice_cells(_surface(sphere), grid, DEGREE, workers=1)
+    stats: dict = {}
+    parallel = slice_cells(_surface(sphere), grid, DEGREE, workers=2, stats=stats)
+    assert stats["workers"] == 2
+    np.testing.assert_array_equal(parallel.piece_cell, serial.piece_cell)
+    np.testing.assert_allclose(parallel.moments, serial.moments, rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(parallel.face_minus, serial.face_minus)
+    assert len(parallel.boundary_triangles) == len(serial.boundary_triangles)
+
+
+def test_bad_surfaces_are_reported():
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=1.0, shape=(3, 3, 3))
+    box = trimesh.creation.box(bounds=[[0.5, 0.5, 0.5], [2.5, 2.5, 2.5]])
+    open_box = Surface(np.asarray(box.vertices), np.asarray(box.faces), closed=False)
+    with pytest.raises(GeometryError, match="the surface is not closed; hex slicing needs a watertight mesh"):
+        slice_cells(open_box, grid)
+    holed = Surface(np.asarray(box.vertices), np.asarray(box.faces[:-1]))
+    with pytest.raises(GeometryError, match=r"not an oriented 2-manifold \(manifold3d: NotManifold\)"):
+        slice_cells(holed, grid)
+    inverted = Surface(np.asarray(box.vertices), np.asarray(box.faces[:, ::-1]))
+    with pytest.raises(GeometryError, match="encloses no volume .* is it inside out"):
+        slice_cells(inverted, grid)
+    with pytest.raises(GeometryError, match=r"face vertex indices must be integers in \[0, 8\)"):
+        slice_cells(Surface(np.asarray(box.vertices), np.asarray(box.faces) + 1), grid)
+    with pytest.raises(GeometryError, match="needs a 3D grid, got a 2D grid"):
+        slice_cells(_surface(box), Grid(origin=(0.0, 0.0), spacing=1.0, shape=(3, 3)))
+    with pytest.raises(GeometryError, match="degree must be an integer >= 0, got -2"):
+        slice_cells(_surface(box), grid, -2)
