@@ -70,27 +70,15 @@ def _fractions(name: str, resolution: int, queue) -> None:
     )
 
 
-def _slicing(name: str, resolution: int, queue) -> None:
-    from engine.geometry.slicing import slice_cells
+def _slicing(name: str, resolution: int, workers: int | None, queue) -> None:
+    from benchmarks.slicing_bench import bench_slicing
     from engine.grid import make_grid
 
     surface = _surface(name)
     grid = make_grid(*surface.bounds, resolution=resolution, padding=1)
-    t = time.perf_counter()
-    cut = slice_cells(surface, grid)
-    seconds = time.perf_counter() - t
-    exact = surface.enclosed_volume()
-    queue.put(
-        {
-            "triangles": len(surface.faces),
-            "grid": list(grid.shape),
-            "seconds": seconds,
-            "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-            "pieces": int(len(cut.volume)),
-            "full_cells": int(np.count_nonzero(cut.full)),
-            "relative_volume_error": abs(float(cut.volume.sum()) - exact) / exact,
-        }
-    )
+    out = bench_slicing(surface, grid, workers=workers)
+    out["peak_rss_gb"] = (out["peak_rss_mb"] + out["children_peak_rss_mb"]) / 1024
+    queue.put(out)
 
 
 def run_isolated(target, *args) -> dict:
@@ -116,6 +104,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="smaller grids (64^3 / 16^3), one repeat")
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--workers", type=int, default=None, help="slicing worker processes (default: automatic)")
     args = ap.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     res_vf, res_slice = (64, 16) if args.quick else (256, 32)
@@ -124,14 +113,14 @@ def main(argv=None) -> int:
     run_isolated(_fractions, "bumpy_sphere", 16)
     for name in MESHES:
         vf = [run_isolated(_fractions, name, res_vf) for _ in range(repeats)]
-        sl = [run_isolated(_slicing, name, res_slice) for _ in range(repeats)]
+        sl = [run_isolated(_slicing, name, res_slice, args.workers) for _ in range(repeats)]
         results[name] = {"volume_fractions": median_of(vf), "hex_slicing": median_of(sl)}
         a, b = results[name]["volume_fractions"], results[name]["hex_slicing"]
         print(
             f"{name:13s} {a['triangles']:7d} tris | fractions {'x'.join(map(str, a['grid']))}: "
             f"{a['seconds']:6.2f} s, {a['peak_rss_gb']:.2f} GB, vol err {a['relative_volume_error']:.1e} | "
             f"slicing {'x'.join(map(str, b['grid']))}: {b['seconds']:5.2f} s, {b['peak_rss_gb']:.2f} GB, "
-            f"{b['pieces']} pieces, vol err {b['relative_volume_error']:.1e}"
+            f"{b['pieces']} pieces ({b['workers']} proc), vol err {b['relative_volume_error']:.1e}"
         )
     if args.json:
         with open(args.json, "w") as f:

@@ -21,13 +21,15 @@ def _error(lines: list[str] | str) -> int:
 
 
 def _read_spec(path: str):
-    from schemas import parse_job
+    """The parsed job spec, or a list of error lines (file unreadable, invalid spec)."""
+    from schemas import SpecError, parse_job
 
     try:
-        text = Path(path).read_bytes()
+        return parse_job(Path(path).read_bytes())
     except OSError as exc:
-        raise FileNotFoundError(f"cannot read job file '{path}': {exc.strerror or exc}") from None
-    return parse_job(text)
+        return [f"cannot read job file '{path}': {exc.strerror or exc}"]
+    except SpecError as exc:
+        return exc.errors
 
 
 class ProgressBar:
@@ -51,14 +53,9 @@ class ProgressBar:
 
 
 def cmd_validate(args) -> int:
-    from schemas import SpecError
-
-    try:
-        spec = _read_spec(args.job)
-    except FileNotFoundError as exc:
-        return _error(str(exc))
-    except SpecError as exc:
-        return _error(exc.errors)
+    spec = _read_spec(args.job)
+    if isinstance(spec, list):
+        return _error(spec)
     print(f"OK: {args.job} ({spec.dimension}D, method {spec.method.kind}, analysis {spec.analysis.kind})")
     return 0
 
@@ -92,8 +89,6 @@ def cmd_voxelize(args) -> int:
         path = write_result(result, args.output)
     except VoxelasticError as exc:
         return _error(str(exc))
-    except FileNotFoundError as exc:
-        return _error(str(exc))
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     exact = surface.enclosed_volume()
@@ -105,19 +100,14 @@ def cmd_voxelize(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from schemas import SpecError
-
-    from .errors import MethodUnavailableError, VoxelasticError
+    from .errors import VoxelasticError
     from .geometry.cache import GeometryCache, default_directory
     from .output import write_result
     from .pipeline import run
 
-    try:
-        spec = _read_spec(args.job)
-    except FileNotFoundError as exc:
-        return _error(str(exc))
-    except SpecError as exc:
-        return _error(exc.errors)
+    spec = _read_spec(args.job)
+    if isinstance(spec, list):
+        return _error(spec)
     if args.arch:
         spec = spec.model_copy(update={"solver": spec.solver.model_copy(update={"arch": args.arch})})
     bar = ProgressBar()
@@ -128,10 +118,7 @@ def cmd_run(args) -> int:
             progress=bar,
             cache=GeometryCache(None if args.no_cache else default_directory()),
         )
-    except MethodUnavailableError as exc:
-        bar.close()
-        return _error(str(exc))
-    except VoxelasticError as exc:
+    except VoxelasticError as exc:  # bad input, or a method not available yet
         bar.close()
         return _error(str(exc))
     bar.close()

@@ -37,17 +37,6 @@ def _box(lower, upper) -> manifold3d.Manifold:
     return manifold3d.Manifold.cube(np.asarray(upper, dtype=float) - lower).translate(lower)
 
 
-def _closure_error(cut: CutCells) -> float:
-    """max over pieces of |sum of outward area vectors| / h^2 (interfaces + boundary triangles)."""
-    total = np.zeros((cut.num_pieces, 3))
-    unit = np.eye(3)[cut.face_axis] * cut.face_area[:, None]
-    np.add.at(total, cut.face_minus, unit)
-    np.add.at(total, cut.face_plus, -unit)
-    t = cut.boundary_triangles
-    np.add.at(total, cut.boundary_piece, 0.5 * np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-    return float(np.abs(total).max() / cut.grid.spacing**2)
-
-
 def _boundary_area(cut: CutCells) -> float:
     t = cut.boundary_triangles
     return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
@@ -62,7 +51,7 @@ def _check_invariants(cut: CutCells) -> None:
     # Interfaces join face neighbours: the plus piece's cell is the minus piece's cell + e_axis.
     step = cut.piece_cell[cut.face_plus] - cut.piece_cell[cut.face_minus]
     np.testing.assert_array_equal(step, np.eye(3, dtype=int)[cut.face_axis])
-    assert _closure_error(cut) < 1e-12
+    assert cut.closure_error() < 1e-12
 
 
 def test_box_in_general_position_gives_exact_pieces():
@@ -220,7 +209,7 @@ def test_translating_a_box_keeps_its_volume():
         solid = _box([-0.61, -0.43, -0.52], [0.57, 0.34, 0.46]).translate(shift)
         cut = slice_cells(_surface(solid), grid, DEGREE)
         assert abs(cut.volume.sum() / (1.18 * 0.77 * 0.98) - 1) < 1e-12
-        assert _closure_error(cut) < 1e-12
+        assert cut.closure_error() < 1e-12
 
 
 def test_surface_outside_the_grid_is_clipped_with_a_warning():
@@ -228,7 +217,7 @@ def test_surface_outside_the_grid_is_clipped_with_a_warning():
     cut = slice_cells(_surface(_box([1.5, 1.5, 1.5], [3.5, 2.5, 2.5])), grid, DEGREE)
     assert cut.volume.sum() == pytest.approx(1.5, rel=1e-13)
     assert cut.warnings == ["the surface extends outside the grid; 25% of its volume outside the grid box was dropped"]
-    assert _closure_error(cut) < 1e-12  # the cut at the grid's edge is boundary
+    assert cut.closure_error() < 1e-12  # the cut at the grid's edge is boundary
 
 
 def test_parallel_workers_give_the_same_pieces():

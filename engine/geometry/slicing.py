@@ -98,6 +98,19 @@ class CutCells:
         """Centres [P, 3] [m] of the pieces' cells: the origin of each piece's xi coordinates."""
         return self.grid.sample_points(self.piece_cell)
 
+    def closure_error(self) -> float:
+        """max over pieces of |sum of outward area vectors| / h^2 (interfaces + boundary): 0 for
+        closed pieces; a check that no face went missing or was counted twice."""
+        if self.num_pieces == 0:
+            return 0.0
+        total = np.zeros((self.num_pieces, 3))
+        vec = np.eye(3)[self.face_axis] * self.face_area[:, None]
+        np.add.at(total, self.face_minus, vec)
+        np.add.at(total, self.face_plus, -vec)
+        t = self.boundary_triangles
+        np.add.at(total, self.boundary_piece, 0.5 * np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
+        return float(np.abs(total).max() / self.grid.spacing**2)
+
 
 @dataclass
 class _Pieces:
