@@ -82,3 +82,24 @@ def test_missing_job_file_and_missing_mesh(tmp_path):
     shutil.copy(EXAMPLE, job)  # refers to cantilever.stl, absent here
     out = cli("run", job, "-o", tmp_path / "x.h5")
     assert out.returncode == 2 and "geometry.mesh: cannot read" in out.stderr
+
+
+def test_voxelize_an_open_mesh_reports_the_fallback(tmp_path):
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    keep = sphere.triangles_center[:, 2] < 0.9  # cut off a cap: a hole too big to fill
+    open_mesh = trimesh.Trimesh(sphere.vertices, sphere.faces[keep], process=False)
+    path = tmp_path / "open.stl"
+    open_mesh.export(path)
+    out = cli("voxelize", path, "--resolution", "16", "-o", tmp_path / "open.h5")
+    assert out.returncode == 0, out.stderr
+    assert "warning: the surface is not closed" in out.stderr
+    assert "winding number" in out.stderr
+    result = read_result(tmp_path / "open.h5")
+    volume = result.volume_fraction.sum() * result.grid.spacing**3
+    full = trimesh.creation.icosphere(subdivisions=3, radius=1.0).volume
+    cap = np.pi * 0.1**2 * (3 - 0.1) / 3  # spherical cap above z = 0.9
+    # the winding number carves roughly the missing cap out of the ball, no more, no less
+    assert full - 1.5 * cap < volume < full - 0.5 * cap
+    assert any("winding number" in w for w in result.solver.warnings)
