@@ -10,20 +10,17 @@ Typical use::
         print("\\n".join(exc.errors))                # "loads.gravity: expected 3 components ..."
 
 ``python -m schemas.export`` regenerates ``schemas/json/job.schema.json`` (``--check`` verifies it).
+Modules: ``base`` (shared conventions), ``regions``, ``job`` (the job and parsing).
 This package is a leaf: it imports neither ``engine`` nor ``service``.
 """
 
-from .job import AllRegion
 from .job import Analysis
 from .job import Boundary
-from .job import BoxRegion
 from .job import DGMethod
 from .job import DisplacementBoundary
 from .job import DynamicAnalysis
 from .job import GeometrySpec
 from .job import GridSpec
-from .job import Halfspace
-from .job import HalfspaceRegion
 from .job import JobSpec
 from .job import LoadsSpec
 from .job import MaterialSpec
@@ -31,17 +28,21 @@ from .job import Method
 from .job import OutputSpec
 from .job import PressureBoundary
 from .job import QuasistaticAnalysis
-from .job import Region
 from .job import SolverSpec
 from .job import SpecError
-from .job import Sphere
-from .job import SphereRegion
 from .job import StaggeredMethod
 from .job import StaticAnalysis
 from .job import TractionBoundary
 from .job import format_errors
 from .job import job_json_schema
 from .job import parse_job
+from .regions import AllRegion
+from .regions import BoxRegion
+from .regions import Halfspace
+from .regions import HalfspaceRegion
+from .regions import Region
+from .regions import Sphere
+from .regions import SphereRegion
 
 __all__ = [
     "AllRegion",

@@ -25,6 +25,7 @@ def test_validate_ok_and_every_error_with_its_path(tmp_path):
     spec = json.loads(EXAMPLE.read_text())
     spec["material"]["poisson_ratio"] = 0.5
     spec["grid"]["padding"] = -1
+    spec["loads"]["gravity"] = [0, 0]
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(spec))
     out = cli("validate", bad)
@@ -32,6 +33,8 @@ def test_validate_ok_and_every_error_with_its_path(tmp_path):
     lines = out.stderr.strip().splitlines()
     assert any(line.startswith("error: material.poisson_ratio:") for line in lines)
     assert any(line.startswith("error: grid.padding:") for line in lines)
+    assert "error: loads.gravity: expected 3 components (dimension 3), got 2" in lines
+    assert len(lines) == 3
     assert "Traceback" not in out.stderr
 
 

@@ -378,8 +378,9 @@ BAD = [
     ("unknown field", "output.fields", ["pressure"], "output.fields.0", "'displacement', 'strain', 'stress' or"),
     ("polygon in 3D", "geometry", {"polygon": SQUARE_WITH_HOLE}, "geometry.polygon",
      "requires dimension 2, got dimension 3"),
-    ("mesh and polygon", "geometry", {"mesh": "a.stl", "polygon": SQUARE_WITH_HOLE}, "geometry",
-     "exactly one of 'mesh' or 'polygon' is required, got both"),
+    # In 3D the polygon is wrong whatever else the geometry says; "got both" is tested in 2D.
+    ("mesh and polygon", "geometry", {"mesh": "a.stl", "polygon": SQUARE_WITH_HOLE}, "geometry.polygon",
+     "requires dimension 2, got dimension 3"),
     ("no geometry source", "geometry", {"scale": 2}, "geometry", "got neither"),
     ("empty mesh name", "geometry.mesh", "", "geometry.mesh", "at least 1 character"),
     ("displacement all null", "boundaries.2.value", [None, None, None], "boundaries.2.value",
@@ -445,6 +446,82 @@ def test_2d_dimension_errors() -> None:
     ]
     assert _errors(_edit(base, "geometry.polygon.0", [[0, 0], [1, 0]])) == [
         "geometry.polygon.0: List should have at least 3 items after validation, not 2"
+    ]
+    assert _errors(_edit(base, "geometry.mesh", "outline.svg")) == [
+        "geometry: exactly one of 'mesh' or 'polygon' is required, got both"
+    ]
+
+
+def test_field_and_cross_field_errors_reported_together() -> None:
+    # A field error does not hide a dimension error elsewhere (nor the other way round).
+    data = _edit(_edit(DESIGN_EXAMPLE, "material.poisson_ratio", 0.5), "loads.gravity", [0, 0])
+    assert _errors(data) == [
+        "material.poisson_ratio: Input should be less than 0.5",
+        "loads.gravity: expected 3 components (dimension 3), got 2",
+    ]
+    edits = {
+        "geometry.transform": [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
+        "grid.padding": -1,
+        "material.poisson_ratio": 0.5,
+        "boundaries.0.region.box": [[0, 0], [1, 1, 1]],
+        "boundaries.2.value": [None, None],
+        "boundaries.3.region.sphere": {"center": [0, 0], "radius": -1},
+        "output.probes": [[0, 0], [1, 1, 1, 1]],
+    }
+    data = DESIGN_EXAMPLE
+    for path, value in edits.items():
+        data = _edit(data, path, value)
+    assert _errors(data) == [  # document order
+        "geometry.transform: expected a 4x4 matrix (dimension 3), got 3x3",
+        "grid.padding: Input should be greater than or equal to 0",
+        "material.poisson_ratio: Input should be less than 0.5",
+        "boundaries.0.region.box.0: expected 3 components (dimension 3), got 2",
+        "boundaries.2.value: expected 3 components (dimension 3), got 2",
+        "boundaries.3.region.sphere.center: expected 3 components (dimension 3), got 2",
+        "boundaries.3.region.sphere.radius: Input should be greater than 0",
+        "output.probes.0: expected 3 components (dimension 3), got 2",
+        "output.probes.1: expected 3 components (dimension 3), got 4",
+    ]
+    polygon_in_3d = _edit(_edit(MINIMAL, "geometry", {"polygon": SQUARE_WITH_HOLE, "scale": 0}), "loads", {})
+    assert _errors(_edit(polygon_in_3d, "loads.gravity", [1])) == [
+        "geometry.polygon: requires dimension 2, got dimension 3",  # not one line per 2-component vertex
+        "geometry.scale: Input should be greater than 0",
+        "loads.gravity: expected 3 components (dimension 3), got 1",
+    ]
+
+
+@pytest.mark.parametrize("dimension", [4, "3", None, [3]])
+def test_invalid_dimension_is_the_only_dimension_error(dimension: object) -> None:
+    # Nothing can be compared with an invalid dimension: no length, polygon or transform errors.
+    data = _edit(DESIGN_EXAMPLE, "dimension", dimension)
+    data = _edit(_edit(data, "loads.gravity", [0, -9.81]), "geometry.transform", [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    data = _edit(data, "material.youngs_modulus", -1)
+    (dimension_line, youngs_line) = _errors(data)
+    assert dimension_line.startswith("dimension: Input should be 2 or 3")
+    assert youngs_line == "material.youngs_modulus: Input should be greater than 0"
+    polygon = _edit(_edit(MINIMAL, "dimension", dimension), "geometry", {"polygon": SQUARE_WITH_HOLE})
+    (line,) = _errors(polygon)
+    assert line.startswith("dimension: ")
+
+
+def test_sub_models_alone_have_no_dimension() -> None:
+    # The dimension applies only while a JobSpec is validated, also after one failed.
+    with pytest.raises(SpecError):
+        parse_job(_edit(MINIMAL, "loads", {"gravity": [0, 0]}))
+    assert LoadsSpec(gravity=(0, -9.81)).gravity == (0.0, -9.81)
+    assert LoadsSpec(gravity=(0, 0, -9.81)).gravity == (0.0, 0.0, -9.81)
+    assert GeometrySpec(polygon=SQUARE_WITH_HOLE).polygon[0][2] == (1.0, 1.0)
+    # ... and an instance handed to a JobSpec is revalidated against its dimension.
+    with pytest.raises(ValidationError) as info:
+        JobSpec(
+            geometry=GeometrySpec(polygon=SQUARE_WITH_HOLE),
+            grid=GridSpec(resolution=8),
+            material=MaterialSpec(youngs_modulus=1e6, poisson_ratio=0.2),
+            loads=LoadsSpec(gravity=(0, -9.81)),
+        )
+    assert format_errors(info.value) == [
+        "geometry.polygon: requires dimension 2, got dimension 3",
+        "loads.gravity: expected 3 components (dimension 3), got 2",
     ]
 
 

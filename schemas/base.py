@@ -1,0 +1,152 @@
+"""What every job-spec model shares: the base model, error helpers, tagged unions and dimension-bound vectors.
+
+Conventions shared by every model:
+
+- unknown keys are errors (``extra="forbid"``; the message suggests the closest known key);
+- every float must be finite (NaN/inf rejected: JSON has none, but Python callers can pass them);
+- SI units throughout: metres, pascals, kg/m^3, seconds, m/s^2;
+- vectors (:data:`Vector`) must have ``JobSpec.dimension`` components. :class:`JobSpec` reads its
+  dimension from the raw input and opens a :func:`dimension_scope` around the validation of its
+  fields, so each coupled check runs at its own field, next to that field's other checks, and every
+  problem of a document is reported at once (``loads.gravity: expected 3 components (dimension 3),
+  got 2`` beside ``material.poisson_ratio: ...``). A sub-model validated on its own has no
+  dimension and accepts 2 or 3 components; passed into a :class:`JobSpec` it is revalidated
+  (``revalidate_instances="always"``), so the coupling holds for Python callers too;
+- tagged unions (``method``, ``boundaries``, ``analysis``, regions) dispatch on their tag before
+  validating, so a mistake is reported by the chosen branch alone, at a path without union tags.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
+from typing import Annotated, Any, Union
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, WrapValidator, model_validator
+from pydantic_core import PydanticCustomError
+
+Loc = tuple[Union[str, int], ...]
+
+
+def custom_error(kind: str, reason: str) -> PydanticCustomError:
+    """A validation error of type ``kind`` whose message is exactly ``reason``."""
+    # The reason goes through ctx, not the template, so braces in user input are never expanded.
+    return PydanticCustomError(kind, "{reason}", {"reason": reason})
+
+
+def raise_at(title: str, issues: list[tuple[Loc, str, str, Any]]) -> None:
+    """Raise one ValidationError for (relative location, type, reason, input) issues, if any.
+
+    Raised inside a validator, pydantic prefixes each location with the validator's own path.
+    """
+    if issues:
+        raise ValidationError.from_exception_data(
+            title,
+            [{"type": custom_error(kind, reason), "loc": loc, "input": value} for loc, kind, reason, value in issues],
+        )
+
+
+def quoted(names: Iterable[str]) -> str:
+    """``'a', 'b', 'c'``: names as they appear in messages."""
+    return ", ".join(repr(n) for n in names)
+
+
+# --- the dimension a document declares ----------------------------------------------------------
+
+_DIMENSION: ContextVar[int | None] = ContextVar("voxelastic_spec_dimension", default=None)
+
+
+@contextmanager
+def dimension_scope(dimension: int | None) -> Iterator[None]:
+    """Within the block, validated vectors must have ``dimension`` components (None: 2 or 3, unchecked)."""
+    token = _DIMENSION.set(dimension)
+    try:
+        yield
+    finally:
+        _DIMENSION.reset(token)
+
+
+def current_dimension() -> int | None:
+    """The dimension of the job spec being validated, or None outside one (or if its own value is invalid)."""
+    return _DIMENSION.get()
+
+
+def check_length(vector: tuple) -> tuple:
+    """Validator: ``vector`` has :func:`current_dimension` components, when there is one."""
+    d = current_dimension()
+    if d is not None and len(vector) != d:
+        raise custom_error("vector_length", f"expected {d} components (dimension {d}), got {len(vector)}")
+    return vector
+
+
+# A vector in R^dimension. The schema states 2..3 items; the exact length needs the document's dimension.
+Vector = Annotated[
+    tuple[float, ...], Field(json_schema_extra={"minItems": 2, "maxItems": 3}), AfterValidator(check_length)
+]
+
+
+# --- models -------------------------------------------------------------------------------------
+
+
+class SpecModel(BaseModel):
+    """Base of every spec model: strict about keys, finite floats, nothing else implicit."""
+
+    # Instances handed to a parent are revalidated so that the parent's dimension applies to them.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, revalidate_instances="always")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _reject_unknown_keys(cls, data: Any) -> Any:
+        # Reported before field validation so that a misspelt key gives one error with a hint,
+        # not "unknown key" plus "field required" for the key that was meant.
+        if isinstance(data, Mapping):
+            known = list(cls.model_fields)
+            issues = []
+            for key in data:
+                if key in known:
+                    continue
+                close = difflib.get_close_matches(str(key), known, n=1)
+                hint = f"did you mean {close[0]!r}?" if close else f"allowed keys: {quoted(known)}"
+                issues.append(((str(key),), "unknown_key", f"unknown key; {hint}", data[key]))
+            raise_at(cls.__name__, issues)
+        return data
+
+
+def tag_dispatch(tag: str, choices: dict[str, type[SpecModel]]) -> WrapValidator:
+    """Validate a tagged union by its ``tag`` key only, so errors come from the chosen branch."""
+    types = tuple(choices.values())
+    expected = quoted(choices)
+
+    def validate(value: Any, handler: Any) -> Any:
+        if isinstance(value, types):
+            return type(value).model_validate(value)
+        if not isinstance(value, Mapping):
+            raise custom_error("object_type", f"expected an object with a {tag!r} key ({expected}), got {value!r}")
+        if tag not in value:
+            raise_at(tag, [((tag,), "missing_tag", f"missing; expected one of {expected}", None)])
+        model = choices.get(value[tag]) if isinstance(value[tag], str) else None
+        if model is None:
+            reason = f"unknown {tag} {value[tag]!r}; expected one of {expected}"
+            raise_at(tag, [((tag,), "unknown_tag", reason, value[tag])])
+        return model.model_validate(value)
+
+    return WrapValidator(validate)
+
+
+def _require_kind(schema: dict[str, Any]) -> None:
+    # The models default ``kind`` for Python callers, but a JSON document must name it.
+    schema["properties"]["kind"].pop("default", None)
+    schema["required"] = ["kind", *schema.get("required", [])]
+
+
+TAGGED = ConfigDict(json_schema_extra=_require_kind)
+"""Config of a tagged-union branch: ``kind`` is required in the JSON Schema."""
+
+
+def not_null(schema: dict[str, Any]) -> None:
+    """``json_schema_extra`` of one key of an exactly-one-of pair: absent rather than null in JSON."""
+    # The schema's oneOf-of-required can then tell the two cases apart.
+    schema.update(next(b for b in schema.pop("anyOf") if b != {"type": "null"}))
+    schema.pop("default", None)

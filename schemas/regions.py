@@ -1,0 +1,96 @@
+"""Regions of space that boundary conditions act on: box, sphere, half-space or everything [m].
+
+A region is a JSON object with exactly one key naming its shape (``{"box": [[...], [...]]}``);
+:data:`Region` validates the branch that key names and no other.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import Field, WrapValidator, field_validator
+
+from .base import SpecModel, Vector, custom_error, quoted
+
+
+class BoxRegion(SpecModel):
+    """Axis-aligned box: min <= x <= max componentwise [m]."""
+
+    box: tuple[Vector, Vector] = Field(description="[[min...], [max...]] corners [m].")
+
+    @field_validator("box")
+    @classmethod
+    def _ordered(cls, box: tuple[tuple[float, ...], tuple[float, ...]]) -> tuple:
+        lo, hi = box
+        # Corners of different lengths are only possible without a dimension (a BoxRegion on its
+        # own); inside a JobSpec the corner with the wrong length has already been reported.
+        if len(lo) == len(hi):
+            for axis, (a, b) in enumerate(zip(lo, hi)):
+                if not a < b:
+                    reason = f"min must be < max in every component (axis {axis}: {a:g} >= {b:g})"
+                    raise custom_error("box_order", reason)
+        return box
+
+
+class Sphere(SpecModel):
+    """Ball |x - center| <= radius."""
+
+    center: Vector = Field(description="Centre [m].")
+    radius: float = Field(gt=0, description="Radius [m].")
+
+
+class SphereRegion(SpecModel):
+    sphere: Sphere
+
+
+class Halfspace(SpecModel):
+    """Half-space (x - point) . normal <= 0: the normal points out of the region.
+
+    ``normal`` is kept as given (any non-zero length); consumers normalise it.
+    """
+
+    point: Vector = Field(description="A point on the bounding plane [m].")
+    normal: Vector = Field(description="Outward normal of the region (non-zero, need not be unit).")
+
+    @field_validator("normal")
+    @classmethod
+    def _nonzero(cls, normal: tuple[float, ...]) -> tuple[float, ...]:
+        if math.hypot(*normal) == 0:
+            raise custom_error("zero_normal", "normal must be non-zero")
+        return normal
+
+
+class HalfspaceRegion(SpecModel):
+    halfspace: Halfspace
+
+
+class AllRegion(SpecModel):
+    """Everything: all material (displacement) or the whole surface (traction, pressure)."""
+
+    all: Literal[True]
+
+
+_REGIONS: dict[str, type[SpecModel]] = {
+    "box": BoxRegion, "sphere": SphereRegion, "halfspace": HalfspaceRegion, "all": AllRegion
+}
+
+
+def _region_dispatch(value: Any, handler: Any) -> Any:
+    """A region is an object with exactly one key naming its shape; validate that branch only."""
+    if isinstance(value, tuple(_REGIONS.values())):
+        return type(value).model_validate(value)
+    if not isinstance(value, Mapping):
+        raise custom_error("region_type", f"expected an object with one of {quoted(_REGIONS)}, got {value!r}")
+    shapes = [k for k in value if k in _REGIONS]
+    if len(shapes) != 1:
+        got = quoted(map(str, value)) if value else "an empty object"
+        hints = [difflib.get_close_matches(str(k), list(_REGIONS), n=1) for k in value if k not in _REGIONS]
+        hint = "".join(f"; did you mean {h[0]!r}?" for h in hints if h) if not shapes else ""
+        raise custom_error("region_shape", f"must have exactly one of {quoted(_REGIONS)}, got {got}{hint}")
+    return _REGIONS[shapes[0]].model_validate(value)
+
+
+Region = Annotated[Union[BoxRegion, SphereRegion, HalfspaceRegion, AllRegion], WrapValidator(_region_dispatch)]
