@@ -13,7 +13,8 @@ transforms. The triangles are then validated and repaired (``mesh_surface``):
 4. winding is made consistent across each connected shell (majority of the input wins);
 5. triangle and quad holes are filled (``trimesh.repair.fill_holes``);
 6. each shell is oriented by its nesting: outer shells outward, cavities inward;
-7. zero or negative enclosed volume -> ``GeometryError``.
+7. zero or negative enclosed volume -> ``GeometryError``;
+8. shells whose solids overlap are replaced by their boolean union (``engine.geometry.shells``).
 
 Every step that changed something leaves a warning with its numbers in ``Surface.warnings``.
 A surface that is still open is returned with ``closed=False``: inside tests then use the
@@ -42,6 +43,7 @@ from trimesh.resolvers import FilePathResolver
 from engine.errors import GeometryError
 from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, place
 from engine.geometry.polygon import polygon_surface, read_drawing
+from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
 from engine.geometry.winding import winding_number
 
@@ -122,7 +124,7 @@ def mesh_surface(
     # A fill may repeat or cancel an existing face (a hole bounded by a face's own edges).
     faces = _require_faces(_drop_bad_faces(faces, warnings), name)
     faces = _orient_consistently(faces, len(vertices), warnings)
-    faces = _orient_by_nesting(vertices, faces, warnings)
+    faces, shell = _orient_by_nesting(vertices, faces, warnings)
     surface = Surface(vertices=vertices, faces=faces, closed=True, warnings=warnings)
     check_volume(surface, name)
     boundary, conflicts = _open_edges(faces, len(vertices))
@@ -139,6 +141,8 @@ def mesh_surface(
             f"the surface is not closed: {'; '.join(problems)};"
             " inside tests use the generalized winding number"
         )
+    else:
+        surface = unite_overlapping_shells(surface, shell)
     return surface
 
 
@@ -428,7 +432,7 @@ def _boundary_loops(faces: np.ndarray, n_vertices: int) -> int:
     return len(np.unique(label[a]))
 
 
-def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) -> np.ndarray:
+def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]):
     """Orient every shell by how deeply it is nested.
 
     A shell inside an odd number of other shells bounds a cavity and must face inward (negative
@@ -460,7 +464,7 @@ def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[s
     flat = np.abs(volume) <= FLAT_TOL * (upper - lower).max(axis=1) ** 3
     wrong = ~flat & ((volume > 0) != (depth % 2 == 0))
     if not wrong.any():
-        return faces
+        return faces, label
     flip = wrong[label]
     faces = faces.copy()
     faces[flip] = faces[flip, ::-1]
@@ -472,4 +476,4 @@ def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[s
             f"inverted {int(wrong.sum())} of {n_shells} shells so that outer shells face outward"
             f" and cavities inward (enclosed volume {volume.sum():.6g} -> {after:.6g})"
         )
-    return faces
+    return faces, label
