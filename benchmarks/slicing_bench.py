@@ -18,6 +18,8 @@ from engine.grid import Grid
 def bench_slicing(surface: Surface, grid: Grid, *, degree: int = 4, workers: int | None = None) -> dict:
     """Slice once and report seconds (wall and CPU, per stage), peak memory and counts.
 
+    stage_seconds: "manifold" (starting the workers, building the solid), "bisect" (cutting and
+    integrating the pieces, in the workers), "moments_and_faces" (ordering, interface pairing).
     peak_rss_mb is this process's peak so far (ru_maxrss), children_peak_rss_mb the largest worker's.
     """
     stats: dict = {}
@@ -34,6 +36,7 @@ def bench_slicing(surface: Surface, grid: Grid, *, degree: int = 4, workers: int
         "seconds": wall,
         "stage_seconds": {k: stats[k] for k in ("manifold", "bisect", "moments_and_faces")},
         "workers": stats["workers"],
+        "parts_moved": stats["parts_moved"],
         "cpu_seconds": time.process_time() - cpu_self
         + (children.ru_utime + children.ru_stime - cpu_children.ru_utime - cpu_children.ru_stime),
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import itertools
+import subprocess
+import sys
 
 import manifold3d
 import numpy as np
@@ -10,11 +12,13 @@ import pytest
 import trimesh
 
 from engine.errors import GeometryError
+from engine.geometry import bisection
 from engine.geometry.moments import (
     box_moments,
     cell_face_moments,
     cell_moments,
     interval_moments,
+    monomial_exponents,
     shift_moments,
     volume_moments,
 )
@@ -220,17 +224,88 @@ def test_surface_outside_the_grid_is_clipped_with_a_warning():
     assert cut.closure_error() < 1e-12  # the cut at the grid's edge is boundary
 
 
-def test_parallel_workers_give_the_same_pieces():
+_FIELDS = ("piece_cell", "full", "volume", "moments", "face_minus", "face_plus", "face_axis", "face_area",
+           "face_moments", "boundary_piece", "boundary_triangles")
+
+
+def _assert_identical(a: CutCells, b: CutCells) -> None:
+    for name in _FIELDS:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_parallel_workers_give_the_same_pieces_bit_for_bit():
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
     grid = Grid(origin=(-1.1, -1.1, -1.1), spacing=0.2, shape=(11, 11, 11))
     serial = slice_cells(_surface(sphere), grid, DEGREE, workers=1)
     stats: dict = {}
     parallel = slice_cells(_surface(sphere), grid, DEGREE, workers=2, stats=stats)
     assert stats["workers"] == 2
-    np.testing.assert_array_equal(parallel.piece_cell, serial.piece_cell)
-    np.testing.assert_allclose(parallel.moments, serial.moments, rtol=0, atol=1e-13)
-    np.testing.assert_array_equal(parallel.face_minus, serial.face_minus)
-    assert len(parallel.boundary_triangles) == len(serial.boundary_triangles)
+    _assert_identical(parallel, serial)
+
+
+def test_work_stealing_in_small_batches_gives_the_same_pieces(monkeypatch):
+    # The first cut (at the vertices' mean) passes through the dense little sphere, so the worker
+    # with the box has far more to cut: the other one runs dry early and takes parts from it.
+    monkeypatch.setattr(bisection, "DIGEST_TRIANGLES", 400)  # many small digests too
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
+    solid = _box([0.1, 0.2, 0.15], [2.1, 1.9, 1.85]) + manifold3d.Manifold(manifold3d.Mesh64(
+        vert_properties=np.asarray(ball.vertices + [3.0, 1.0, 1.0]), tri_verts=np.asarray(ball.faces, dtype=np.uint64)))
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=0.125, shape=(32, 16, 16))
+    procs = bisection.start_workers(2)
+    try:
+        digests, info = bisection.bisect_pieces(solid, grid, DEGREE, 1e-12, procs)
+    finally:
+        bisection.stop_workers(procs)
+    assert info["workers"] == 2 and info["parts_moved"] >= 1 and len(digests) > 10
+    serial = slice_cells(_surface(solid), grid, DEGREE, workers=1)
+    _check_invariants(serial)
+    assert abs(serial.volume.sum() / solid.volume() - 1) < 1e-12
+    _assert_identical(slice_cells(_surface(solid), grid, DEGREE, workers=2), serial)
+
+
+def test_a_failing_worker_leaves_the_bisection_to_the_caller(monkeypatch):
+    def dying_workers(count):  # interpreters that exit at once: their pipes break
+        return [subprocess.Popen([sys.executable, "-c", "import sys; sys.exit(3)"], stdin=subprocess.PIPE,
+                                 stdout=subprocess.PIPE) for _ in range(count)]
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    grid = Grid(origin=(-1.1, -1.1, -1.1), spacing=0.4, shape=(6, 6, 6))
+    serial = slice_cells(_surface(sphere), grid, DEGREE, workers=1)
+    monkeypatch.setattr("engine.geometry.slicing.start_workers", dying_workers)
+    stats: dict = {}
+    cut = slice_cells(_surface(sphere), grid, DEGREE, workers=2, stats=stats)
+    assert stats["workers"] == 1
+    _assert_identical(cut, serial)
+
+
+def test_digest_of_a_half_cell():
+    # The lower half of cell (1, 0, 2): five faces on the cell's planes, the top one is surface.
+    grid = Grid(origin=(0.0, 0.0, 0.0), spacing=0.5, shape=(3, 3, 3))
+    half = _box([0.5, 0.0, 1.0], [1.0, 0.5, 1.25])
+    mesh = half.to_mesh64()
+    cut = bisection._Cut()
+    cut.cells.append((1, 0, 2))
+    cut.meshes.append((np.array(mesh.vert_properties[:, :3]), np.array(mesh.tri_verts, dtype=np.int64)))
+    d = bisection.digest(cut, grid, DEGREE)
+    np.testing.assert_allclose(d["moments"][0], box_moments([-0.5, -0.5, -0.5], [0.5, 0.5, 0.0], DEGREE),
+                               rtol=0, atol=1e-15)
+    assert sorted(d["comp_kind"]) == [0, 1, 2, 3, 4]  # x low/high, y low/high, z low
+    assert np.all(d["comp_piece"] == 0) and len(d["plane_comp"]) == 10 and len(d["surf_piece"]) == 2
+    np.testing.assert_allclose(d["surf_xyz"][:, :, 2], 1.25)
+    mx = interval_moments(-0.5, 0.5, DEGREE)
+    exps = monomial_exponents(3, DEGREE)
+    z_low = d["comp_moments"][list(d["comp_kind"]).index(4)]
+    np.testing.assert_allclose(z_low, mx[exps[:, 0]] * mx[exps[:, 1]] * (-0.5) ** exps[:, 2], rtol=0, atol=1e-15)
+
+
+def test_edge_components_join_triangles_sharing_an_edge_within_a_group():
+    # 0-1 share edge (1, 2); 2 shares edge (1, 2) too but is in another group; 3 touches 0 at a
+    # vertex only; 4 shares edge (3, 5) with 3.
+    vid = np.array([[0, 1, 2], [2, 1, 4], [1, 2, 9], [0, 3, 5], [5, 3, 7]])
+    group = np.array([0, 0, 1, 0, 0])
+    np.testing.assert_array_equal(bisection._edge_components(vid, group), [0, 0, 1, 2, 2])
+    chain = np.array([[i, i + 1, i + 2] for i in range(200)])[::-1]  # a strip, numbered backwards
+    np.testing.assert_array_equal(bisection._edge_components(chain, np.zeros(200, int)), np.zeros(200))
 
 
 def test_bad_surfaces_are_reported():

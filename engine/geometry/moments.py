@@ -23,7 +23,6 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import roots_jacobi, roots_legendre
 
 from ..errors import GeometryError
 
@@ -86,6 +85,8 @@ def triangle_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
             weights += [wa] * 3
         bary, w = np.array(rows), np.array(weights)
     else:
+        from scipy.special import roots_jacobi, roots_legendre  # only here: workers start faster
+
         n = math.ceil((degree + 1) / 2)
         r, wr = roots_legendre(n)
         s, ws = roots_jacobi(n, 1.0, 0.0)
