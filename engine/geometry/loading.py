@@ -45,6 +45,7 @@ from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, plac
 from engine.geometry.polygon import polygon_surface, read_drawing
 from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
+from engine.geometry.topology import edge_balance, edges
 from engine.geometry.winding import winding_number
 
 MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
@@ -327,19 +328,10 @@ def _drop_unused_vertices(vertices: np.ndarray, faces: np.ndarray, warnings: lis
     return vertices[used], (np.cumsum(used) - 1)[faces]
 
 
-def _edges(faces: np.ndarray, n_vertices: int):
-    """Undirected edges of the faces: (edge id per face corner [3k], faces per edge [e],
-    directed ends per corner [3k, 2]); corner 3 f + j is the edge leaving vertex j of face f."""
-    ends = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = np.minimum(ends[:, 0], ends[:, 1]) * n_vertices + np.maximum(ends[:, 0], ends[:, 1])
-    _, edge, counts = np.unique(key, return_inverse=True, return_counts=True)
-    return edge.reshape(-1), counts, ends
-
-
 def _manifold_adjacency(faces: np.ndarray, n_vertices: int):
     """Face pairs across edges used by exactly two faces: (face a [p], face b [p], same
     direction [p] bool: both traverse the edge the same way, so one must be reversed)."""
-    edge, counts, ends = _edges(faces, n_vertices)
+    edge, counts, ends = edges(faces, n_vertices)
     corner = np.argsort(edge, kind="stable")
     two = np.concatenate([[0], np.cumsum(counts)[:-1]])[counts == 2]
     c0, c1 = corner[two], corner[two + 1]
@@ -393,9 +385,8 @@ def _open_edges(faces: np.ndarray, n_vertices: int) -> tuple[int, int]:
     prism sums are exact -- when every edge a->b is matched by as many edges b->a. This also
     accepts non-manifold edges shared by two touching shells.
     """
-    edge, counts, ends = _edges(faces, n_vertices)
-    direction = np.where(ends[:, 0] < ends[:, 1], 1, -1)
-    unbalanced = np.bincount(edge, weights=direction, minlength=len(counts)) != 0
+    _, counts, net = edge_balance(faces, n_vertices)
+    unbalanced = net != 0
     return int(np.sum(unbalanced & (counts == 1))), int(np.sum(unbalanced & (counts > 1)))
 
 
@@ -422,7 +413,7 @@ def _fill_holes(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) ->
 
 def _boundary_loops(faces: np.ndarray, n_vertices: int) -> int:
     """Number of connected curves formed by edges used by a single face."""
-    edge, counts, ends = _edges(faces, n_vertices)
+    edge, counts, ends = edges(faces, n_vertices)
     single = counts[edge] == 1
     if not single.any():
         return 0

@@ -47,6 +47,7 @@ from ..errors import GeometryError
 from ..grid import Grid
 from .fractions import TILE, _check_inside, scan_slabs, slab_tiles
 from .surface import Surface
+from .topology import rim_edges
 
 # Sample points per axis in a sampled sub-cell, by dimension (q^d points each).
 SAMPLES_PER_AXIS = {2: 4, 3: 2}
@@ -107,7 +108,7 @@ def close_holes(surface: Surface, grid: Grid) -> Closure:
     faces = np.asarray(surface.faces, dtype=np.int64)
     vertices = np.asarray(surface.vertices, dtype=np.float64)
     if d == 3:
-        ends, mult = _rim_edges(faces)
+        ends, mult = rim_edges(faces, len(vertices))
         labels = _components(ends, len(vertices))
         used = np.unique(ends)
     else:
@@ -438,18 +439,6 @@ class _Budget:
     def charge(self, stage: str, pairs: float) -> None:
         self.check(stage, pairs)
         self.spent += pairs
-
-
-def _rim_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary chain of triangles [k, 3]: oriented edges [E, 2] with net multiplicity [E] > 0."""
-    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    sign = np.where(edges[:, 0] < edges[:, 1], 1, -1)
-    keys, inverse = np.unique(np.sort(edges, axis=1), axis=0, return_inverse=True)
-    net = np.zeros(len(keys), dtype=np.int64)
-    np.add.at(net, inverse.ravel(), sign)
-    keep = net != 0
-    keys, net = keys[keep], net[keep]
-    return np.where((net > 0)[:, None], keys, keys[:, ::-1]), np.abs(net)
 
 
 def _components(edges: np.ndarray, n: int) -> np.ndarray:
