@@ -1,0 +1,167 @@
+"""Regions of space that boundary conditions select: which points they hold, which surface they cut.
+
+The job spec names a region by its shape (``schemas.regions``). Here each shape becomes a small
+object with ``contains(points)`` (displacement conditions select material sample points) and
+``clip(facets)`` (traction and pressure act on the part of the surface inside the region).
+Box and half-space are intersections of half-spaces, so their clipping is exact (Sutherland-
+Hodgman, one plane at a time). A ball is not polyhedral: its clipping subdivides facets until a
+piece is provably inside or outside, or smaller than ``tolerance``, and then decides a piece by its
+centroid; the area it can misassign is bounded by ``tolerance`` times the length of the patch rim.
+Membership is closed: points on the boundary are inside (a fixed face lying exactly on a box face
+is selected).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import VoxelasticError
+
+
+@dataclass(frozen=True)
+class Halfspaces:
+    """Intersection of half-spaces ``normals @ x <= offsets``; normals [p, d] unit, offsets [p] [m].
+
+    No half-spaces at all is the whole space (the ``all`` region)."""
+
+    normals: np.ndarray
+    offsets: np.ndarray
+
+    def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
+        """Points [n, d] inside (closed, widened by ``slack`` [m]) -> bool [n]."""
+        points = np.asarray(points, dtype=float)
+        if len(self.offsets) == 0:
+            return np.ones(len(points), dtype=bool)
+        return np.all(points @ self.normals.T <= self.offsets + slack, axis=1)
+
+    def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Exact parts of facets [N, d, d] (triangles / segments) inside: (pieces [M, d, d], source
+        facet index [M]). Clipped triangles are fan-triangulated; orientation is kept."""
+        facets = np.asarray(facets, dtype=float)
+        d = facets.shape[-1]
+        poly = [facets[i] for i in range(len(facets))]
+        source = list(range(len(facets)))
+        for n, c in zip(self.normals, self.offsets):
+            kept_poly, kept_source = [], []
+            for p, s in zip(poly, source):
+                q = _clip_polygon(p, n, c) if d == 3 else _clip_segment(p, n, c)
+                if q is not None:
+                    kept_poly.append(q)
+                    kept_source.append(s)
+            poly, source = kept_poly, kept_source
+        if d == 2:
+            pieces = np.array(poly).reshape(-1, 2, 2)
+            return pieces, np.asarray(source, dtype=np.int64)
+        tris, owner = [], []
+        for p, s in zip(poly, source):
+            for k in range(1, len(p) - 1):
+                tris.append((p[0], p[k], p[k + 1]))
+                owner.append(s)
+        return np.array(tris).reshape(-1, 3, 3), np.asarray(owner, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Ball:
+    """|x - center| <= radius; center [d] [m], radius [m]."""
+
+    center: np.ndarray
+    radius: float
+
+    def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
+        points = np.asarray(points, dtype=float)
+        return np.linalg.norm(points - self.center, axis=1) <= self.radius + slack
+
+    def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Parts of facets [N, d, d] inside, to within ``tolerance`` [m] (default radius / 1000):
+        pieces [M, d, d] and their source facet [M]."""
+        facets = np.asarray(facets, dtype=float)
+        tol = self.radius * 1e-3 if tolerance is None else float(tolerance)
+        if not tol > 0:
+            raise ValueError(f"tolerance must be positive, got {tolerance}")
+        pieces, owner = [], []
+        todo, source = facets, np.arange(len(facets))
+        while len(todo):
+            dist = np.linalg.norm(todo - self.center, axis=2)  # [n, d] corner distances
+            inside = np.all(dist <= self.radius, axis=1)  # convex region: all corners in -> all in
+            centroid = todo.mean(axis=1)
+            reach = np.linalg.norm(todo - centroid[:, None, :], axis=2).max(axis=1)
+            outside = np.linalg.norm(centroid - self.center, axis=1) - reach > self.radius
+            small = ~inside & ~outside & (reach <= tol)
+            take = inside | (small & self.contains(centroid))
+            pieces.append(todo[take])
+            owner.append(source[take])
+            split = ~inside & ~outside & ~small
+            todo, source = _subdivide(todo[split]), np.repeat(source[split], 2 ** (todo.shape[-1] - 1))
+        d = facets.shape[-1]
+        return np.concatenate(pieces).reshape(-1, d, d), np.concatenate(owner).astype(np.int64)
+
+
+Region = Halfspaces | Ball
+
+
+def make_region(spec, dim: int) -> Region:
+    """The region of a job-spec region model (``schemas.regions``) in ``dim`` dimensions."""
+    if getattr(spec, "box", None) is not None:
+        lo, hi = (np.asarray(v, dtype=float) for v in spec.box)
+        eye = np.eye(dim)
+        return Halfspaces(np.concatenate([eye, -eye]), np.concatenate([hi, -lo]))
+    if getattr(spec, "sphere", None) is not None:
+        return Ball(np.asarray(spec.sphere.center, dtype=float), float(spec.sphere.radius))
+    if getattr(spec, "halfspace", None) is not None:
+        n = np.asarray(spec.halfspace.normal, dtype=float)
+        n = n / np.linalg.norm(n)
+        return Halfspaces(n[None, :], np.array([n @ np.asarray(spec.halfspace.point, dtype=float)]))
+    if getattr(spec, "all", None):
+        return Halfspaces(np.zeros((0, dim)), np.zeros(0))
+    raise VoxelasticError(f"region: unknown shape {spec!r}")
+
+
+def require_selection(count: int, what: str, name: str) -> None:
+    """A boundary condition that selects nothing is an error naming it (a slab thinner than a cell
+    is the usual cause)."""
+    if count == 0:
+        raise VoxelasticError(
+            f"{name}: the region selects no {what}; a slab thinner than a cell is the usual cause - widen it"
+        )
+
+
+def _clip_polygon(p: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray | None:
+    """Planar polygon p [k, 3] cut to normal . x <= offset (None when nothing is left)."""
+    side = p @ normal - offset
+    if np.all(side <= 0):
+        return p
+    if np.all(side > 0):
+        return None
+    out = []
+    for i in range(len(p)):
+        a, b, sa, sb = p[i], p[(i + 1) % len(p)], side[i], side[(i + 1) % len(p)]
+        if sa <= 0:
+            out.append(a)
+        if (sa <= 0) != (sb <= 0):
+            out.append(a + (b - a) * (sa / (sa - sb)))
+    return np.array(out) if len(out) >= 3 else None
+
+
+def _clip_segment(p: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray | None:
+    sa, sb = p @ normal - offset
+    if sa <= 0 and sb <= 0:
+        return p
+    if sa > 0 and sb > 0:
+        return None
+    cut = p[0] + (p[1] - p[0]) * (sa / (sa - sb))
+    return np.array([p[0], cut]) if sa <= 0 else np.array([cut, p[1]])
+
+
+def _subdivide(facets: np.ndarray) -> np.ndarray:
+    """Halve segments [n, 2, 2] / quarter triangles [n, 3, 3] by edge midpoints, keeping orientation."""
+    if facets.shape[-1] == 2:
+        a, b = facets[:, 0], facets[:, 1]
+        m = 0.5 * (a + b)
+        return np.stack([np.stack([a, m], 1), np.stack([m, b], 1)], axis=1).reshape(-1, 2, 2)
+    a, b, c = facets[:, 0], facets[:, 1], facets[:, 2]
+    ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
+    return np.stack(
+        [np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], axis=1
+    ).reshape(-1, 3, 3)

@@ -1,0 +1,91 @@
+"""Regions: closed membership, exact clipping by planes, bounded clipping by balls."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from engine.errors import VoxelasticError
+from engine.regions import Ball, make_region, require_selection
+from schemas import parse_job
+
+
+def regions_of(*specs, dim=3):
+    job = {
+        "dimension": dim,
+        "geometry": {"mesh": "m.stl"},
+        "grid": {"resolution": 8},
+        "material": {"youngs_modulus": 1.0, "poisson_ratio": 0.3},
+        "boundaries": [{"kind": "pressure", "region": r, "value": 1.0} for r in specs],
+    }
+    return [make_region(b.region, dim) for b in parse_job(job).boundaries]
+
+
+def area_vectors(tris):
+    return 0.5 * np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+
+
+def test_membership_is_closed_and_normals_are_normalised():
+    box, ball, half, everything = regions_of(
+        {"box": [[0, 0, 0], [1, 1, 1]]},
+        {"sphere": {"center": [0, 0, 0], "radius": 1.0}},
+        {"halfspace": {"point": [0.5, 0, 0], "normal": [3, 0, 0]}},
+        {"all": True},
+    )
+    pts = np.array([[1.0, 0.5, 0.0], [1.0 + 1e-12, 0.5, 0.5], [0.0, 0.0, 1.0], [0.5, 9.0, -9.0]])
+    np.testing.assert_array_equal(box.contains(pts), [True, False, True, False])
+    np.testing.assert_array_equal(ball.contains(pts), [False, False, True, False])
+    np.testing.assert_array_equal(half.contains(pts), [False, False, True, True])
+    np.testing.assert_array_equal(everything.contains(pts), [True] * 4)
+    assert box.contains(pts[1:2], slack=1e-9)[0]
+
+
+def test_halfspace_clips_a_cube_surface_exactly():
+    cube = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    (half,) = regions_of({"halfspace": {"point": [0.3, 0, 0], "normal": [1, 0, 0]}})
+    pieces, source = half.clip(cube.triangles)
+    vec = area_vectors(pieces)
+    assert abs(np.linalg.norm(vec, axis=1).sum() - (1.0 + 4 * 0.3)) < 1e-14
+    # the clipped closed surface plus the cap (area 1, normal +x) is closed again
+    np.testing.assert_allclose(vec.sum(axis=0), [-1.0, 0.0, 0.0], atol=1e-14)
+    assert np.all(pieces[:, :, 0] <= 0.3 + 1e-15)
+    # every piece keeps its facet's orientation
+    normals = cube.face_normals[source]
+    assert np.all(np.einsum("ij,ij->i", vec, normals) > 0)
+
+
+def test_thin_end_box_selects_the_end_face_and_its_strips():
+    bar = trimesh.creation.box(bounds=[[0, -0.1, -0.1], [1, 0.1, 0.1]])
+    (end,) = regions_of({"box": [[0.999, -0.2, -0.2], [1.1, 0.2, 0.2]]})
+    pieces, _ = end.clip(bar.triangles)
+    area = np.linalg.norm(area_vectors(pieces), axis=1).sum()
+    assert abs(area - (0.04 + 4 * 0.2 * 0.001)) < 1e-14
+
+
+def test_ball_clipping_error_is_bounded_by_tolerance_times_rim():
+    plate = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
+    ball = Ball(np.zeros(3), 0.5)
+    exact, rim = np.pi * 0.25, np.pi
+    errors = []
+    for tol in (2e-2, 2e-3, 2e-4):
+        pieces, source = ball.clip(plate, tolerance=tol)
+        area = np.linalg.norm(area_vectors(pieces), axis=1).sum()
+        errors.append(abs(area - exact))
+        assert errors[-1] <= tol * rim
+        assert set(np.unique(source)) <= {0, 1}
+    assert errors[2] < errors[0]
+
+
+def test_2d_segments_are_clipped_exactly():
+    square = np.array([[[0, 0], [1, 0]], [[1, 0], [1, 1]], [[1, 1], [0, 1]], [[0, 1], [0, 0]]], float)
+    (box,) = regions_of({"box": [[0.25, -1], [2, 0.5]]}, dim=2)
+    pieces, source = box.clip(square)
+    lengths = np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1)
+    assert abs(lengths.sum() - (0.75 + 0.5)) < 1e-15
+    np.testing.assert_array_equal(source, [0, 1])
+    np.testing.assert_allclose(pieces[0], [[0.25, 0], [1, 0]])  # direction kept
+
+
+def test_empty_selection_names_the_boundary():
+    require_selection(3, "surface", "boundaries.1 (tip_load)")
+    with pytest.raises(VoxelasticError, match=r"boundaries.1 \(tip_load\): the region selects no surface"):
+        require_selection(0, "surface", "boundaries.1 (tip_load)")
