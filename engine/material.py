@@ -1,0 +1,67 @@
+"""Linear isotropic elasticity as small pure functions (numpy; kernels get their own ti.func twin).
+
+Voigt order follows the result contract: 3D (xx, yy, zz, yz, xz, xy), 2D (xx, yy, xy). Strains are
+tensor components (epsilon_xy, not the engineering shear 2 epsilon_xy). 2D is plane strain:
+epsilon_zz = 0, so sigma_zz = lambda tr(epsilon) enters the von Mises stress.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
+    """(lambda, mu) [Pa] from E [Pa] and nu [-] (0 <= nu < 0.5)."""
+    E, nu = float(youngs_modulus), float(poisson_ratio)
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+@dataclass(frozen=True)
+class Material:
+    """E [Pa], nu [-], density [kg/m^3], model "linear" | "corotated"."""
+
+    youngs_modulus: float
+    poisson_ratio: float
+    density: float = 1000.0
+    model: str = "linear"
+
+    @classmethod
+    def from_spec(cls, spec) -> "Material":
+        return cls(spec.youngs_modulus, spec.poisson_ratio, spec.density, spec.model)
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        return lame_parameters(self.youngs_modulus, self.poisson_ratio)
+
+
+def _shear_slice(dim: int) -> slice:
+    return slice(3, 6) if dim == 3 else slice(2, 3)
+
+
+def stress(strain: np.ndarray, lam: float, mu: float, dim: int) -> np.ndarray:
+    """sigma = lambda tr(eps) I + 2 mu eps, Voigt [..., 6 | 3] -> [..., 6 | 3] [Pa]."""
+    strain = np.asarray(strain, dtype=float)
+    out = 2 * mu * strain
+    out[..., :dim] += lam * strain[..., :dim].sum(axis=-1, keepdims=True)
+    return out
+
+
+def von_mises(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | None = None) -> np.ndarray:
+    """von Mises stress [...] [Pa] of Voigt stresses [..., 6 | 3].
+
+    2D (plane strain) needs sigma_zz = nu (sigma_xx + sigma_yy) = lambda / (2 (lambda + mu)) (sxx + syy),
+    hence ``lam`` and ``mu``.
+    """
+    sigma = np.asarray(sigma, dtype=float)
+    if dim == 3:
+        normal = sigma[..., :3]
+    else:
+        if lam is None or mu is None:
+            raise ValueError("von_mises: plane strain needs lam and mu for sigma_zz")
+        szz = lam / (2 * (lam + mu)) * (sigma[..., 0] + sigma[..., 1])
+        normal = np.concatenate([sigma[..., :2], szz[..., None]], axis=-1)
+    dev = normal - normal.mean(axis=-1, keepdims=True)
+    shear = sigma[..., _shear_slice(dim)]
+    return np.sqrt(1.5 * (dev**2).sum(axis=-1) + 3 * (shear**2).sum(axis=-1))
