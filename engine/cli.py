@@ -65,7 +65,8 @@ def cmd_voxelize(args) -> int:
     from .geometry.fractions import volume_fractions
     from .geometry.loading import load_surface
     from .grid import make_grid
-    from .output import FieldData, Result, SolverReport, write_result
+    from .output import write_result
+    from .pipeline import Geometry, geometry_result
     from .runtime import init
 
     try:
@@ -76,17 +77,8 @@ def cmd_voxelize(args) -> int:
         vf = volume_fractions(surface, grid)
         spec = {"geometry": {"mesh": Path(args.mesh).name, "scale": args.scale}, "grid": grid.to_dict(), "dimension": args.dimension}
         warnings = surface.warnings + vf.warnings
-        result = Result(
-            grid=grid,
-            method="voxelize",
-            spec=spec,
-            volume_fraction=vf.dense(),
-            fields=FieldData(),
-            surface_vertices=surface.vertices,
-            surface_faces=surface.faces,
-            solver=SolverReport(iterations=0, residual=0.0, stage_times={"voxelize": time.perf_counter() - t}, warnings=warnings),
-        )
-        path = write_result(result, args.output)
+        geo = Geometry(surface, grid, fractions=vf, warnings=warnings, stage_times={"voxelize": time.perf_counter() - t})
+        path = write_result(geometry_result(spec, geo, "voxelize"), args.output)
     except VoxelasticError as exc:
         return _error(str(exc))
     for w in warnings:

@@ -18,6 +18,7 @@ import numpy as np
 
 from schemas import JobSpec, parse_job
 
+from . import __version__
 from .errors import GeometryError, GridError, MethodUnavailableError
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.fractions import VolumeFractions, control_offsets, volume_fractions
@@ -209,7 +210,7 @@ def run(
     init(spec.solver.arch, spec.solver.precision)
     geo = prepare_geometry(spec, mesh, filename=filename, base_dir=base_dir, progress=progress, cache=cache, limits=limits)
     raise MethodUnavailableError(
-        f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {_version()} yet; "
+        f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {__version__} yet; "
         f"geometry stages completed ({'x'.join(map(str, geo.grid.shape))} grid, "
         f"solid volume {_solid_volume(geo):.6g}); no fields were computed"
     )
@@ -219,9 +220,3 @@ def _solid_volume(geo: Geometry) -> float:
     if geo.fractions is not None:
         return geo.fractions.solid_volume()
     return float(np.sum(geo.cut_cells.volume))
-
-
-def _version() -> str:
-    from . import __version__
-
-    return __version__
