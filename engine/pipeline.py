@@ -1,8 +1,9 @@
 """Job spec + mesh -> geometry -> grid -> cut-cell geometry -> (discretization -> solve) -> Result.
 
 The same function serves the CLI, the Python API (``engine.simulate``) and the service workers.
-Stages report through ``progress(stage, fraction, info)``. Until a discretization lands, ``run``
-performs the geometry stages and then raises ``MethodUnavailableError``: it never fakes a field.
+Stages report through ``progress(stage, fraction, info)``. The staggered method runs end to end;
+for a method that has not landed (DG) ``run`` performs the geometry stages and then raises
+``MethodUnavailableError``: it never fakes a field.
 """
 
 from __future__ import annotations
@@ -192,6 +193,23 @@ def geometry_result(spec_dict: dict, geo: Geometry, method: str) -> Result:
     )
 
 
+@dataclass
+class Functions:
+    """Python-API callables for manufactured solutions (all take points [N, d] [m]).
+
+    body_force -> [N, d] [N/m^3] replaces loads.gravity; displacement[name] -> [N, d] [m] and
+    traction[name] -> [N, d] [Pa] replace the value of the boundary with that name; stress[name] ->
+    [N, d, d] [Pa] makes a traction boundary apply sigma n; regions[name] -> bool [N] replaces that
+    boundary's region (membership of DOF samples; a surface facet counts when its centroid does).
+    """
+
+    body_force: Callable | None = None
+    displacement: dict[str, Callable] = field(default_factory=dict)
+    traction: dict[str, Callable] = field(default_factory=dict)
+    stress: dict[str, Callable] = field(default_factory=dict)
+    regions: dict[str, Callable] = field(default_factory=dict)
+
+
 def run(
     spec: JobSpec | dict | str | bytes,
     mesh: MeshInput = None,
@@ -201,6 +219,7 @@ def run(
     progress: Progress = _quiet,
     cache: GeometryCache | None = None,
     limits: Limits = Limits(),
+    functions: Functions | None = None,
 ) -> Result:
     """Run a job end to end. ``mesh``: bytes (with ``filename``) or a path; default geometry.mesh."""
     if not isinstance(spec, JobSpec):
@@ -209,11 +228,36 @@ def run(
 
     init(spec.solver.arch, spec.solver.precision)
     geo = prepare_geometry(spec, mesh, filename=filename, base_dir=base_dir, progress=progress, cache=cache, limits=limits)
-    raise MethodUnavailableError(
-        f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {__version__} yet; "
-        f"geometry stages completed ({'x'.join(map(str, geo.grid.shape))} grid, "
-        f"solid volume {_solid_volume(geo):.6g}); no fields were computed"
+    if spec.method.kind != "staggered":
+        raise MethodUnavailableError(
+            f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {__version__} yet; "
+            f"geometry stages completed ({'x'.join(map(str, geo.grid.shape))} grid, "
+            f"solid volume {_solid_volume(geo):.6g}); no fields were computed"
+        )
+    from .analysis import run_analysis
+    from .staggered.problem import make_staggered
+
+    times = dict(geo.stage_times)
+    t = time.perf_counter()
+    progress("discretization", 0.32, {})
+    method = make_staggered(spec, geo, functions or Functions())
+    times["discretization"] = time.perf_counter() - t
+    t = time.perf_counter()
+    outcome = run_analysis(method, spec.analysis, spec.output, progress)
+    times["solve"] = time.perf_counter() - t
+    result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
+    result.fields, result.steps = outcome.final, outcome.steps
+    result.probe_points = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
+    if not spec.output.surface:
+        result.surface_vertices = result.surface_faces = None
+    result.solver = SolverReport(
+        iterations=outcome.iterations,
+        residual=outcome.residual,
+        stage_times=times,
+        warnings=geo.warnings + method.warnings,
     )
+    progress("done", 1.0, {"iterations": outcome.iterations, "residual": outcome.residual})
+    return result
 
 
 def _solid_volume(geo: Geometry) -> float:

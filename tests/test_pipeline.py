@@ -60,7 +60,22 @@ def test_polygon_spec_in_2d():
     assert abs(geo.fractions.solid_volume() - 1.5) < 1e-13
 
 
-def test_run_refuses_honestly_until_a_method_lands(tmp_path):
-    spec = cantilever_spec(resolution=8)
+def test_run_staggered_end_to_end_and_dg_refuses_honestly():
+    spec = cantilever_spec(resolution=16)
+    result = run(spec, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))
+    tip = result.fields.probes["displacement"][0]
+    # Euler-Bernoulli: gravity q L^4 / 8EI + tip load P L^3 / 3EI = 0.0368 + 0.0100 m (span 1 m)
+    assert -0.05 < tip[2] < -0.035 and abs(tip[0]) < 1e-3 * abs(tip[2])
+    assert result.solver.iterations > 0 and result.solver.residual <= 1e-8
+    assert set(result.fields.cells) == {"displacement", "von_mises"}
+    dg = spec.model_copy(update={"method": parse_job({**spec.model_dump(mode="json"), "method": {"kind": "dg"}}).method})
     with pytest.raises(MethodUnavailableError, match="no fields were computed"):
+        run(dg, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))
+
+
+def test_a_clamp_thinner_than_the_samples_is_named_with_the_net_force():
+    from engine.solvers.rigid import UnbalancedLoadError
+
+    spec = cantilever_spec(resolution=8)  # the clamp slab x <= 0.05 holds only u_x samples at h = 1/8: y, z and the twist stay free
+    with pytest.raises(UnbalancedLoadError, match=r"leave 3 rigid-body mode\(s\).*net force \[0\.0, 0\.0, -4"):
         run(spec, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))

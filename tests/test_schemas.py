@@ -315,7 +315,7 @@ def test_cantilever_example() -> None:
     assert spec.loads.gravity == (0.0, 0.0, -9.81)
     clamp, tip = spec.boundaries
     assert isinstance(clamp, DisplacementBoundary) and clamp.value == (0.0, 0.0, 0.0)
-    assert clamp.region.box == ((-0.1, -0.2, -0.2), (0.02, 0.2, 0.2))
+    assert clamp.region.box == ((-0.1, -0.2, -0.2), (0.05, 0.2, 0.2))
     assert isinstance(tip, TractionBoundary) and tip.region.box[0][0] > 0.99 and tip.value == (0.0, 0.0, -1000.0)
     assert spec.output.fields == ["displacement", "von_mises"]
     assert (spec.output.probes, spec.output.surface) == ([(1.0, 0.0, 0.0)], True)

@@ -1,0 +1,1 @@
+"""Linear solvers shared by the methods: preconditioned CG and rigid-body mode handling."""

@@ -1,0 +1,94 @@
+"""Rigid-body modes: which ones the Dirichlet conditions leave free, and whether the loads balance.
+
+A body (a connected component of material) whose prescribed displacements do not pin all its
+rigid modes (d translations and d(d-1)/2 infinitesimal rotations) can only be solved when the
+loads do no work on the free modes (net force and torque zero); the solve then runs in the
+complement of those modes. Unbalanced loads on a free body are an error naming the net force.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from ..errors import VoxelasticError
+
+# Loads balance when their work on a unit-normalised free mode is below this times their size.
+BALANCE_TOLERANCE = 1e-6
+# A mode is pinned when the Dirichlet DOFs see it with at least this share of its norm.
+PIN_TOLERANCE = 1e-10
+
+
+class UnbalancedLoadError(VoxelasticError):
+    """Loads on a body with free rigid modes do not balance."""
+
+
+def rigid_modes(points: np.ndarray, axis: np.ndarray, center: np.ndarray | None = None) -> np.ndarray:
+    """Rigid modes [n, m] at scalar DOFs: the DOF at ``points`` [n, d] [m] carries component
+    ``axis`` [n] of each mode. Columns: d translations, then rotations in the planes (k, l), k < l,
+    about ``center`` (default the centroid) with unit angle: u_k = -(x_l - c_l), u_l = x_k - c_k."""
+    points = np.asarray(points, dtype=float)
+    d = points.shape[1]
+    c = points.mean(axis=0) if center is None else np.asarray(center, dtype=float)
+    x = points - c
+    cols = [(axis == k).astype(float) for k in range(d)]
+    for k, l in itertools.combinations(range(d), 2):
+        cols.append(np.where(axis == k, -x[:, l], 0.0) + np.where(axis == l, x[:, k], 0.0))
+    return np.stack(cols, axis=1)
+
+
+def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np.ndarray) -> list[np.ndarray]:
+    """For each body, an orthonormal basis [n_body, k] (over that body's unfixed DOFs, in order) of
+    the rigid modes the fixed DOFs leave free; bodies with none free are omitted.
+
+    points [n, d], axis [n]: every DOF; fixed [n] bool: prescribed; body [n] int: component label.
+    Returns a list of (dof indices [n_body_free], basis [n_body_free, k]) flattened as arrays of
+    shape [n_body_free, 1 + k] would be awkward, hence pairs.
+    """
+    out = []
+    for label in np.unique(body):
+        on = body == label
+        modes = rigid_modes(points[on], axis[on])
+        norms = np.linalg.norm(modes, axis=0)
+        modes = modes / np.where(norms > 0, norms, 1.0)
+        pinned = modes[fixed[on]]
+        gram = pinned.T @ pinned
+        w, v = np.linalg.eigh(gram)
+        loose = v[:, w < PIN_TOLERANCE * max(1.0, float(w.max(initial=0.0)))]
+        if loose.shape[1] == 0:
+            continue
+        free_dofs = np.nonzero(on & ~fixed)[0]
+        basis = modes[~fixed[on]] @ loose
+        q, _ = np.linalg.qr(basis)
+        out.append((free_dofs, q))
+    return out
+
+
+def check_balance(points: np.ndarray, axis: np.ndarray, loads: np.ndarray, modes: list) -> None:
+    """Raise ``UnbalancedLoadError`` when ``loads`` [n] [N] do work on a free mode of ``modes``
+    (from :func:`free_modes`) beyond the tolerance, naming the net force and torque of that body."""
+    d = points.shape[1]
+    for dofs, q in modes:
+        f = loads[dofs]
+        size = np.abs(f).sum()
+        if size == 0:
+            continue
+        scale = np.sqrt(len(dofs))  # q's columns are unit vectors spread over the body's DOFs
+        work = np.abs(q.T @ f).max() * scale
+        if work > BALANCE_TOLERANCE * size:
+            x = points[dofs]
+            c = x.mean(axis=0)
+            force = np.array([f[axis[dofs] == k].sum() for k in range(d)])
+            r = x - c
+            torque = [
+                float((np.where(axis[dofs] == l, r[:, k], 0.0) * f - np.where(axis[dofs] == k, r[:, l], 0.0) * f).sum())
+                for k, l in itertools.combinations(range(d), 2)
+            ]
+            raise UnbalancedLoadError(
+                f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body free, and its "
+                f"loads do not balance: net force {np.round(force, 12).tolist()} N, net torque about its centroid "
+                f"{np.round(torque, 12).tolist()} N m (total load {size:.6g} N); add a displacement boundary "
+                "that holds every component (a clamp region must contain the samples of all components: make it at "
+                "least one cell thick) or balance the loads"
+            )

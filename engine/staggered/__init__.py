@@ -1,0 +1,1 @@
+"""Staggered-grid volume-fraction elasticity (dolny-2025): operators, assembly, solvers."""

@@ -1,0 +1,340 @@
+"""The staggered-grid method as a whole: fractions + material + boundary conditions -> solves -> fields.
+
+``StaggeredElasticity`` sequences the pieces: the fine ``Level`` (tiles touching material, exact
+fractions), prescribed DOFs from displacement regions, the consistent load vector (body force
+weighted by face fractions, surface tractions by quadrature on the mesh triangles), rigid-mode
+checks for bodies the prescribed DOFs leave free, the multigrid-preconditioned CG solve and the
+fields at cell centres, probes and surface vertices. ``engine.analysis`` drives it in time.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.ndimage as ndi
+
+from ..geometry.fractions import VolumeFractions
+from ..geometry.surface import Surface
+from ..material import Material, stress, von_mises
+from ..output import FieldData
+from ..regions import require_selection
+from ..solvers.cg import SolveStats, pcg
+from ..solvers.rigid import check_balance, free_modes
+from . import kernels, sampling
+from .multigrid import Multigrid
+from .operator import Level, device_array, float_type, make_fine_level, pairs
+
+PointFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass
+class Prescribed:
+    """Displacement on the material inside ``region`` (anything with ``contains(points)``):
+    ``value`` [d] with None for free components, or a callable points [N, d] -> [N, d] [m]
+    (then ``components`` says which are prescribed)."""
+
+    region: object
+    value: tuple | PointFunction
+    name: str
+    components: tuple[bool, ...] | None = None
+
+
+@dataclass
+class SurfaceLoad:
+    """Traction on the mesh surface inside ``region``: exactly one of traction [d] or callable
+    [Pa], pressure [Pa] (positive pushes in), stress [d, d] or callable points -> [N, d, d] [Pa]."""
+
+    region: object
+    name: str
+    traction: object = None
+    pressure: float | None = None
+    stress: object = None
+
+
+@dataclass
+class State:
+    """A solved displacement u [d, size] on the fine level (prescribed values included)."""
+
+    u: np.ndarray
+    stats: SolveStats
+    seconds: float
+
+
+@dataclass
+class StaggeredElasticity:
+    fractions: VolumeFractions
+    surface: Surface
+    material: Material
+    prescribed: list[Prescribed] = field(default_factory=list)
+    surface_loads: list[SurfaceLoad] = field(default_factory=list)
+    body_force: np.ndarray | PointFunction | None = None  # [d] or callable, [N/m^3]
+    rtol: float = 1e-8
+    max_iterations: int = 5000
+    warnings: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        grid = self.fractions.grid
+        self.grid, self.dim = grid, grid.dim
+        lam, mu = self.material.lame
+        self.level = level = make_fine_level(self.fractions, lam, mu)
+        lay = level.layout
+        self.index = lay.indices()  # [positions, d] global index of every kept position
+        n = len(self.index)
+        # (a, position) of every active DOF, and its sample point
+        comp, pos = np.nonzero(level.active[:, :n])
+        self.dof_comp, self.dof_pos = comp, pos
+        eye = np.eye(self.dim)
+        self.dof_points = np.asarray(grid.origin) + grid.spacing * (self.index[pos] + 0.5 - 0.5 * eye[comp])
+        self.values = np.zeros((self.dim, level.size))  # prescribed displacement
+        fixed = np.zeros((self.dim, level.size), dtype=bool)
+        for bc in self.prescribed:
+            self._prescribe(bc, fixed)
+        level.set_free(level.active & ~fixed)
+        self.fixed = fixed & level.active
+        self.loads = self._load_vector()
+        self.modes = self._floating_modes()
+        if self.modes:
+            check_balance(self.dof_points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
+                          [(dofs, q) for dofs, q, _ in self.modes])
+            free = sum(q.shape[1] for _, q, _ in self.modes)
+            self.warnings.append(
+                f"{free} rigid-body mode(s) are not held by any displacement boundary; the loads balance, so the "
+                "solution is the one with no rigid motion (orthogonal to those modes)"
+            )
+        self.multigrid = Multigrid(level)
+        self.space = _Space(level)
+
+    # ------------------------------------------------------------------ setup
+    def _prescribe(self, bc: Prescribed, fixed: np.ndarray) -> None:
+        inside = np.asarray(bc.region.contains(self.dof_points), dtype=bool)
+        if callable(bc.value):
+            want = np.asarray(bc.components if bc.components is not None else (True,) * self.dim)
+            chosen = inside & want[self.dof_comp]
+            require_selection(int(chosen.sum()), "material", bc.name)
+            vals = np.asarray(bc.value(self.dof_points[chosen]), dtype=float).reshape(-1, self.dim)
+            vals = vals[np.arange(len(vals)), self.dof_comp[chosen]]
+        else:
+            want = np.array([v is not None for v in bc.value])
+            chosen = inside & want[self.dof_comp]
+            require_selection(int(chosen.sum()), "material", bc.name)
+            vals = np.array([0.0 if v is None else float(v) for v in bc.value])[self.dof_comp[chosen]]
+        if not np.all(np.isfinite(vals)):
+            raise ValueError(f"{bc.name}: prescribed displacement is not finite")
+        a, p = self.dof_comp[chosen], self.dof_pos[chosen]
+        fixed[a, p] = True
+        self.values[a, p] = vals
+
+    def _load_vector(self) -> np.ndarray:
+        """Consistent nodal forces [d, size] [N] of body force and surface loads (not scaled)."""
+        level, grid, d = self.level, self.grid, self.dim
+        f = np.zeros((d, level.size))
+        if self.body_force is not None:
+            pts, a, p = self.dof_points, self.dof_comp, self.dof_pos
+            if callable(self.body_force):
+                b = np.asarray(self.body_force(pts), dtype=float).reshape(-1, d)[np.arange(len(pts)), a]
+            else:
+                b = np.asarray(self.body_force, dtype=float)[a]
+            f[a, p] += grid.spacing**d * level.vf_host[a, p] * b
+        active = self._active_lookup
+        for load in self.surface_loads:
+            pts, w, t = sampling.boundary_tractions(self.surface, load.region, grid.spacing, name=load.name,
+                                                    traction=load.traction, pressure=load.pressure, stress=load.stress)
+            for a, (index, force) in enumerate(sampling.surface_loads(grid, pts, w, t, active, name=load.name)):
+                np.add.at(f[a], self.level.layout.positions(index), force)
+        if not np.all(np.isfinite(f)):
+            raise ValueError("loads: the load vector is not finite (check loads.gravity and traction values)")
+        return f
+
+    def _active_lookup(self, a: int, index: np.ndarray) -> np.ndarray:
+        pos = self.level.layout.positions(index)
+        return (pos >= 0) & self.level.active[a, np.maximum(pos, 0)]
+
+    def _floating_modes(self) -> list:
+        """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
+        positions a * size + p of those DOFs)."""
+        cell = self.level.layout.dense(self.level.vc_host)
+        labels, count = ndi.label(cell > 0, structure=np.ones((3,) * self.dim))
+        if count == 0:
+            return []
+        index = self.index[self.dof_pos]
+        shift = np.eye(self.dim, dtype=np.int64)[self.dof_comp]
+        body = np.zeros(len(index), dtype=np.int64)
+        for J in (index, index - shift):
+            ok = np.all((J >= 0) & (J < np.asarray(cell.shape)), axis=1)
+            lab = np.zeros(len(J), dtype=np.int64)
+            lab[ok] = labels[tuple(J[ok].T)]
+            body = np.where(body == 0, lab, body)
+        fixed = self.fixed[self.dof_comp, self.dof_pos]
+        out = []
+        for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body):
+            flat = self.dof_comp[dofs] * self.level.size + self.dof_pos[dofs]
+            out.append((dofs, q, flat))
+        return out
+
+    # ------------------------------------------------------------------ solve
+    def set_time_step(self, dt: float | None) -> None:
+        """Backward Euler with step dt [s] adds M / dt^2 to the operator; None goes back to statics."""
+        self.level.set_shift(0.0 if dt is None else 1.0 / dt**2, self.material.density)
+        self.multigrid.update()
+
+    def solve(self, load_scale: float = 1.0, value_scale: float = 1.0, x0: np.ndarray | None = None,
+              inertia: np.ndarray | None = None, on_iteration: Callable[[int, float], None] | None = None) -> State:
+        """u minimising the energy with loads and prescribed values scaled; ``inertia``: the
+        predicted displacement u^k + dt v^k [d, size] of a backward-Euler step (after set_time_step)."""
+        t0 = time.perf_counter()
+        level = self.level
+        uD = device_array(value_scale * self.values * self.fixed)
+        KuD = level.zeros()
+        level.apply_unmasked(uD, KuD)
+        rhs = load_scale * self.loads - KuD.to_numpy()
+        if inertia is not None:
+            rhs += level.shift * level.mass.to_numpy() * inertia
+            rhs -= level.shift * level.mass.to_numpy() * value_scale * self.values * self.fixed
+        rhs *= level.free
+        if self.modes:
+            rhs = self._project(rhs)
+        b = device_array(rhs)
+        x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
+        precondition = self.multigrid.precondition
+        if self.modes:
+            def precondition(r, z):
+                self.multigrid.precondition(r, z)
+                z.from_numpy(self._project(z.to_numpy()).astype(float_type()))
+        stats = pcg(self.space, level.apply, precondition, b, x, rtol=self.rtol,
+                    max_iterations=self.max_iterations, on_iteration=on_iteration)
+        u = x.to_numpy().astype(np.float64)
+        if self.modes:
+            u = self._project(u)
+        u = u * level.free + value_scale * self.values * self.fixed
+        return State(u, stats, time.perf_counter() - t0)
+
+    def _project(self, v: np.ndarray) -> np.ndarray:
+        flat = v.reshape(-1).copy()
+        for _, q, pos in self.modes:
+            flat[pos] -= q @ (q.T @ flat[pos])
+        return flat.reshape(v.shape)
+
+    # ------------------------------------------------------------------ fields
+    def cell_fields(self, u: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
+        """Fields at cell centres [*grid.shape, c], NaN where a cell holds no material."""
+        lay, d, h = self.level.layout, self.dim, self.grid.spacing
+        shape = self.grid.shape
+        full = lay.dense(u)  # [d, *box]
+        solid = lay.dense(self.level.vc_host)[tuple(slice(0, n) for n in shape)] > 0
+        out: dict[str, np.ndarray] = {}
+        cut = tuple(slice(0, n) for n in shape)
+
+        def shifted(a: np.ndarray, offset) -> np.ndarray:
+            return a[tuple(slice(o, o + n) for o, n in zip(offset, shape))]
+
+        eye = np.eye(d, dtype=int)
+        if "displacement" in names:
+            disp = np.stack([0.5 * (full[a][cut] + shifted(full[a], eye[a])) for a in range(d)], axis=-1)
+            out["displacement"] = np.where(solid[..., None], disp, np.nan)
+        if any(n in names for n in ("strain", "stress", "von_mises")):
+            strain = self._cell_strain(full, shifted, cut)
+            lam, mu = self.material.lame
+            if "strain" in names:
+                out["strain"] = np.where(solid[..., None], strain, np.nan)
+            if "stress" in names or "von_mises" in names:
+                sigma = stress(strain, lam, mu, d)
+                if "stress" in names:
+                    out["stress"] = np.where(solid[..., None], sigma, np.nan)
+                if "von_mises" in names:
+                    out["von_mises"] = np.where(solid, von_mises(sigma, d, lam, mu), np.nan)
+        return out
+
+    def _cell_strain(self, full, shifted, cut) -> np.ndarray:
+        """Voigt strain [*shape, 6 | 3]: normal strains from the cell's own faces, shear strains as
+        the edge-fraction-weighted mean of the edges around the cell (edges outside the material
+        carry no energy, so their strain is meaningless)."""
+        lay, d, h = self.level.layout, self.dim, self.grid.spacing
+        eye = np.eye(d, dtype=int)
+        normal = [(shifted(full[a], eye[a]) - full[a][cut]) / h for a in range(d)]
+        shear = {}
+        for q, (a, b) in enumerate(pairs(d)):
+            ua, ub = full[a], full[b]
+            edge = np.zeros_like(ua)
+            edge[tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))] = 0.5 * (
+                (ua - np.roll(ua, 1, axis=b)) + (ub - np.roll(ub, 1, axis=a))
+            )[tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))] / h
+            w = lay.dense(self.level.ve_host[q])
+            num = sum(shifted(edge * w, o) for o in _corners(d, a, b))
+            den = sum(shifted(w, o) for o in _corners(d, a, b))
+            plain = sum(shifted(edge, o) for o in _corners(d, a, b)) / 4
+            shear[(a, b)] = np.where(den > 0, num / np.where(den > 0, den, 1.0), plain)
+        order = [(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)]
+        return np.stack(normal + [shear[p] for p in order], axis=-1)
+
+    def point_displacement(self, u: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement [N, d] at points by interpolation of the active samples (NaN outside)."""
+        level = self.level
+
+        def lookup(a: int, index: np.ndarray):
+            pos = level.layout.positions(index)
+            ok = (pos >= 0) & level.active[a, np.maximum(pos, 0)]
+            return u[a, np.maximum(pos, 0)] * ok, ok
+
+        return sampling.interpolate(self.grid, np.asarray(points, dtype=float), lookup)
+
+    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
+               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
+        cells = self.cell_fields(state.u, names)
+        data = FieldData(cells=cells, time=time_value)
+        if velocity is not None and "velocity" in names:
+            data.cells["velocity"] = self.cell_fields(velocity, ["displacement"])["displacement"]
+        if probes is not None and len(probes):
+            data.probes = self._probe_fields(state.u, probes, cells, names, velocity)
+        if surface:
+            data.surface["displacement"] = self.point_displacement(state.u, self.surface.vertices)
+        return data
+
+    def _probe_fields(self, u, probes, cells, names, velocity) -> dict[str, np.ndarray]:
+        out = {}
+        probes = np.asarray(probes, dtype=float)
+        if "displacement" in names:
+            out["displacement"] = self.point_displacement(u, probes)
+        if velocity is not None and "velocity" in names:
+            out["velocity"] = self.point_displacement(velocity, probes)
+        cell = self.grid.cell_of(probes)
+        inside = np.all((cell >= 0) & (cell < np.asarray(self.grid.shape)), axis=1)
+        for name in ("strain", "stress", "von_mises"):
+            if name in cells:
+                arr = cells[name]
+                vals = np.full((len(probes),) + arr.shape[self.dim:], np.nan)
+                vals[inside] = arr[tuple(cell[inside].T)]
+                out[name] = vals
+        return out
+
+
+def _corners(d: int, a: int, b: int) -> list[tuple[int, ...]]:
+    """Offsets of the four (a, b) edges around a cell."""
+    return [tuple((k == a) * i + (k == b) * j for k in range(d)) for i in (0, 1) for j in (0, 1)]
+
+
+class _Space:
+    """Vector algebra of the CG solver on one level's arrays."""
+
+    def __init__(self, level: Level) -> None:
+        self.level = level
+
+    def zeros(self):
+        return self.level.zeros()
+
+    def dot(self, x, y) -> float:
+        return kernels.dot(x, y)
+
+    def axpy(self, alpha: float, x, y) -> None:
+        kernels.axpy(alpha, x, y)
+
+    def xpby(self, x, beta: float, y) -> None:
+        kernels.xpby(x, beta, y)
+
+    def copy(self, src, dst) -> None:
+        kernels.copy(src, dst)
+
+    def finite(self, x) -> bool:
+        return kernels.count_nonfinite(x) == 0

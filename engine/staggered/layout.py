@@ -1,0 +1,130 @@
+"""Tiled storage of staggered quantities: only tiles of 8^d indices that touch material are kept.
+
+Every staggered kind (cells, faces of each normal, edges) is indexed by the same index box
+[0, n_k + 1)^d (see ``engine.grid``); a ``TileLayout`` names the kept tiles of that box. Arrays
+on a layout are flat per component: position ``p = tile * 8^d + local`` with the local index in C
+order, plus one trailing *zero tile* (tile number ``count``) that stands for every tile not kept,
+so stencils read zeros outside the material without branches. ``tile_map`` (dense over the tile
+grid, tiny) turns a global index into its tile; the kernels use the same rule.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..blocks import BlockSparse
+
+TILE = 8
+
+
+@dataclass(frozen=True)
+class TileLayout:
+    """box: (d,) index extent (n + 1 per axis); coords: [nt, d] int32 kept tile coordinates
+    (C-order sorted); tile_map: [ceil(box / 8)] int32 tile number of each tile, ``nt`` if not kept."""
+
+    box: tuple[int, ...]
+    coords: np.ndarray
+    tile_map: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        return len(self.box)
+
+    @property
+    def count(self) -> int:
+        """Number of kept tiles (the zero tile has this number)."""
+        return len(self.coords)
+
+    @property
+    def tile_size(self) -> int:
+        return TILE**self.dim
+
+    @property
+    def size(self) -> int:
+        """Length of a per-component array, the zero tile included."""
+        return (self.count + 1) * self.tile_size
+
+    def neighbours(self) -> np.ndarray:
+        """[count, 3^d] int32: tile number of the neighbour at offset o in {-1, 0, 1}^d (code
+        sum_k (o_k + 1) 3^(d-1-k)); ``count`` (the zero tile) where it is not kept."""
+        d = self.dim
+        shifts = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+        tiles = self.coords.astype(np.int64)[:, None, :] + shifts[None]
+        inside = np.all((tiles >= 0) & (tiles < np.asarray(self.tile_map.shape)), axis=2)
+        out = np.full(inside.shape, self.count, dtype=np.int32)
+        out[inside] = self.tile_map[tuple(tiles[inside].T)]
+        return out
+
+    def positions(self, index: np.ndarray) -> np.ndarray:
+        """Flat positions [n] of global indices [n, d]; -1 where the tile is not kept or out of the box."""
+        index = np.asarray(index, dtype=np.int64).reshape(-1, self.dim)
+        tiles = index // TILE
+        inside = np.all((index >= 0) & (index < np.asarray(self.box)), axis=1)
+        t = np.full(len(index), self.count, dtype=np.int64)
+        t[inside] = self.tile_map[tuple(tiles[inside].T)]
+        local = np.ravel_multi_index(tuple((index - tiles * TILE).T), (TILE,) * self.dim)
+        return np.where(t < self.count, t * self.tile_size + local, -1)
+
+    def indices(self) -> np.ndarray:
+        """Global index [size - tile_size, d] of every position of the kept tiles (in order)."""
+        local = np.stack(np.unravel_index(np.arange(self.tile_size), (TILE,) * self.dim), axis=1)
+        return (self.coords.astype(np.int64)[:, None, :] * TILE + local[None]).reshape(-1, self.dim)
+
+    def load(self, values: BlockSparse) -> np.ndarray:
+        """A block-sparse array (8^d tiles on the same tile grid) as a flat array on this layout;
+        tiles of ``values`` that are not kept here must be zero (they are dropped)."""
+        out = np.zeros(self.size)
+        if len(values.coords):
+            if values.block != TILE:
+                raise ValueError(f"block-sparse tiles of {values.block} cannot be loaded on a layout of {TILE}")
+            t = self.tile_map[tuple(np.minimum(values.coords.T, np.asarray(self.tile_map.shape)[:, None] - 1))]
+            kept = t < self.count
+            rows = out.reshape(self.count + 1, self.tile_size)
+            rows[t[kept]] = values.data[kept].reshape(int(kept.sum()), -1)
+        return out
+
+    def dense(self, flat: np.ndarray, shape: tuple[int, ...] | None = None) -> np.ndarray:
+        """A flat array [size] (or [c, size]) as a dense array over the index box, cut to ``shape``."""
+        flat = np.asarray(flat)
+        if flat.ndim > 1:
+            return np.stack([self.dense(f, shape) for f in flat])
+        d, tiles_shape = self.dim, self.tile_map.shape
+        full = np.zeros(tuple(t * TILE for t in tiles_shape))
+        view = full.reshape(sum(((t, TILE) for t in tiles_shape), ()))
+        rows = flat.reshape((self.count + 1,) + (TILE,) * d)[: self.count]
+        view[tuple(i for k in range(d) for i in (self.coords[:, k], slice(None)))] = rows
+        return full[tuple(slice(0, n) for n in (shape or self.box))]
+
+    def select(self, keep: np.ndarray) -> tuple[TileLayout, np.ndarray]:
+        """The layout of the kept tiles ``keep`` [count] bool and, for re-indexing arrays, the old tile
+        number of every new tile followed by the old zero tile: flat arrays map by ``rows[order]``."""
+        order = np.concatenate([np.nonzero(keep)[0], [self.count]])
+        return make_layout(self.box, self.coords[keep]), order
+
+
+def make_layout(box: tuple[int, ...], coords: np.ndarray) -> TileLayout:
+    """Layout of the tiles ``coords`` [nt, d] (duplicates removed, sorted) over the index ``box``."""
+    d = len(box)
+    tiles_shape = tuple(-(-n // TILE) for n in box)
+    coords = np.asarray(coords, dtype=np.int32).reshape(-1, d)
+    coords = coords[np.all((coords >= 0) & (coords < np.asarray(tiles_shape)), axis=1)]
+    coords = np.unique(coords, axis=0) if len(coords) else coords
+    tile_map = np.full(tiles_shape, len(coords), dtype=np.int32)
+    tile_map[tuple(coords.T)] = np.arange(len(coords), dtype=np.int32)
+    return TileLayout(tuple(int(n) for n in box), coords, tile_map)
+
+
+def dilate(coords: np.ndarray, dim: int) -> np.ndarray:
+    """The tiles ``coords`` [nt, d] and all their 3^d - 1 neighbours (duplicates possible)."""
+    shifts = np.array(list(itertools.product((-1, 0, 1), repeat=dim)), dtype=np.int32)
+    return (np.asarray(coords, dtype=np.int32)[:, None, :] + shifts[None]).reshape(-1, dim)
+
+
+def reorder(flat: np.ndarray, order: np.ndarray, tile_size: int) -> np.ndarray:
+    """Re-index a flat array [..., size] by ``order`` from :meth:`TileLayout.select`."""
+    lead = flat.shape[:-1]
+    rows = flat.reshape(lead + (-1, tile_size))
+    return np.ascontiguousarray(rows[..., order, :]).reshape(lead + (-1,))

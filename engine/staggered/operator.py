@@ -1,0 +1,159 @@
+"""One grid level of the staggered elasticity operator: its tiles, fractions, masks and apply.
+
+``Level`` owns the Taichi arrays of one level and sequences the kernels of ``kernels.py``:
+A = K + shift M restricted to the free DOFs (``mask``), where K is the Hessian of the discrete
+energy (DESIGN.md) and M the lumped mass from face fractions (only when a shift is set: static
+runs never build a mass). The finest level comes from exact volume fractions
+(:func:`make_fine_level`), coarser ones from averaging cell fractions (:func:`make_coarse_level`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+from ..geometry.fractions import VolumeFractions
+from . import kernels
+from .layout import TileLayout, dilate, make_layout, reorder
+
+
+def pairs(d: int) -> tuple[tuple[int, int], ...]:
+    """Axis pairs (a, b), a < b, of the shear strains, in the order of the ``ve`` rows."""
+    return kernels.PAIRS[d]
+
+
+def float_type() -> type:
+    from ..runtime import ensure_initialized
+
+    return np.float64 if ensure_initialized().precision == "f64" else np.float32
+
+
+def device_array(values: np.ndarray, dtype: type | None = None):
+    """A Taichi ndarray holding ``values`` (float arrays in the solve precision)."""
+    values = np.asarray(values)
+    if dtype is None:
+        dtype = float_type() if values.dtype.kind == "f" else values.dtype
+    values = np.ascontiguousarray(values, dtype=dtype)
+    out = ti.ndarray(dtype={np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32}[np.dtype(dtype).type], shape=values.shape)
+    out.from_numpy(values)
+    return out
+
+
+class Level:
+    """The operator on one level. Fractions: vc [size] cells, ve [pairs, size] edges, vf [d, size]
+    faces (control-volume fractions in [0, 1]); spacing h [m]; lam, mu [Pa]."""
+
+    def __init__(self, layout: TileLayout, spacing: float, vc: np.ndarray, ve: np.ndarray, vf: np.ndarray,
+                 lam: float, mu: float) -> None:
+        d = layout.dim
+        self.layout, self.spacing, self.dim = layout, float(spacing), d
+        self.lam, self.mu = float(lam), float(mu)
+        self.vc_host, self.ve_host, self.vf_host = vc, ve, vf
+        size, ts = layout.size, layout.tile_size
+        self.coords = device_array(layout.coords.astype(np.int32))
+        self.tmap = device_array(layout.tile_map.astype(np.int32))
+        self.nbr = device_array(layout.neighbours())
+        self.vc, self.ve = device_array(vc), device_array(ve)
+        active = device_array(np.zeros((d, size), dtype=np.int32))
+        kernels.active_faces(d, self.coords, self.tmap, self.vc, active)
+        kernels.prune_edges(d, self.coords, self.tmap, active, self.ve)
+        self.active = active.to_numpy().astype(bool)
+        self.ve_host = ve = self.ve.to_numpy().astype(np.float64)
+        full = np.ones(layout.count, dtype=bool)
+        for v in (vc[None], ve):
+            full &= np.all(v.reshape(len(v), -1, ts)[:, : layout.count] == 1.0, axis=(0, 2))
+        self.full_tiles = int(full.sum())
+        self.full = device_array(full.astype(np.int32))
+        self.sc = device_array(np.zeros((d, size)))
+        self.se = device_array(np.zeros((len(pairs(d)), size)))
+        self.shift, self.density = 0.0, 0.0
+        self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
+        self.set_free(self.active)
+
+    @property
+    def size(self) -> int:
+        return self.layout.size
+
+    def zeros(self):
+        return ti.ndarray(dtype=ti.f64 if float_type() is np.float64 else ti.f32, shape=(self.dim, self.size))
+
+    def set_free(self, free: np.ndarray) -> None:
+        """free [d, size] bool: the unknowns (active and not prescribed)."""
+        self.free = np.asarray(free, dtype=bool) & self.active
+        self.mask = device_array(self.free.astype(float))
+        self._update_diagonal()
+
+    def set_shift(self, shift: float, density: float) -> None:
+        """A = K + shift M with M = rho h^d Vf (backward Euler: shift = 1 / dt^2)."""
+        self.shift, self.density = float(shift), float(density)
+        if self.mass is None and shift != 0.0:
+            self.mass = device_array(density * self.spacing**self.dim * self.vf_host)
+        self._update_diagonal()
+
+    def _mass_or_mask(self):
+        return self.mass if self.mass is not None else self.mask
+
+    def _update_diagonal(self) -> None:
+        self.dinv = self.zeros()
+        d = self.dim
+        kernels.inverse_diagonal(d, self.coords, self.tmap, self.mask, self.vc, self.ve, self.lam, self.mu,
+                                 self.spacing ** (d - 2), self._mass_or_mask(), self.shift, self.dinv)
+
+    def apply(self, x, y) -> None:
+        """y = A x on the free DOFs (x must vanish off them)."""
+        d = self.dim
+        kernels.weighted_stresses(d, self.nbr, self.full, x, self.vc, self.ve,
+                                  self.lam, self.mu, 1.0 / self.spacing, self.sc, self.se)
+        kernels.stress_divergence(d, self.nbr, self.mask, self.sc, self.se,
+                                  self.spacing ** (d - 1), x, self._mass_or_mask(), self.shift, y)
+
+    def apply_unmasked(self, x, y) -> None:
+        """y = K x at every active DOF (for loads from prescribed values and reactions)."""
+        saved = self.mask
+        self.mask = device_array(self.active.astype(float))
+        try:
+            self.apply(x, y)
+        finally:
+            self.mask = saved
+
+
+def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
+    """The finest level: the kept tiles are those touching material, with exact fractions."""
+    grid = fractions.grid
+    d = grid.dim
+    box = tuple(n + 1 for n in grid.shape)
+    cell_offset = (0,) * d
+    unit = [tuple(int(k == a) for k in range(d)) for a in range(d)]
+    edge_offsets = [tuple(int(k in p) for k in range(d)) for p in pairs(d)]
+    data_tiles = np.concatenate([fractions.control[s].coords for s in fractions.control])
+    layout = make_layout(box, dilate(data_tiles, d))
+    vc = layout.load(fractions.control[cell_offset])
+    ve = np.stack([layout.load(fractions.control[s]) for s in edge_offsets])
+    vf = np.stack([layout.load(fractions.control[s]) for s in unit])
+    return _pruned(layout, grid.spacing, vc, ve, vf, lam, mu)
+
+
+def make_coarse_level(fine: Level) -> Level:
+    """The level of spacing 2h: every control volume is a union of 2^d fine cells, so its fraction
+    is the mean of theirs (exact given the fine cell fractions)."""
+    d = fine.dim
+    box = tuple((n - 1 + 1) // 2 + 3 for n in fine.layout.box)  # ceil(cells / 2) + 2 cells (+ 1 index)
+    layout = make_layout(box, dilate(np.unique(fine.layout.coords // 2, axis=0), d))
+    vc_dev = device_array(np.zeros(layout.size))
+    ve_dev = device_array(np.zeros((len(pairs(d)), layout.size)))
+    vf_dev = device_array(np.zeros((d, layout.size)))
+    kernels.coarse_fractions(d, device_array(layout.coords.astype(np.int32)), device_array(layout.tile_map.astype(np.int32)),
+                             fine.tmap, fine.layout.count, fine.vc, vc_dev, ve_dev, vf_dev)
+    return _pruned(layout, 2 * fine.spacing, vc_dev.to_numpy(), ve_dev.to_numpy(), vf_dev.to_numpy(), fine.lam, fine.mu)
+
+
+def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float) -> Level:
+    """Drop the tiles holding no active DOF and no material, then build the level."""
+    probe = Level(layout, spacing, vc, ve, vf, lam, mu)
+    ts = layout.tile_size
+    keep = probe.active.reshape(layout.dim, -1, ts)[:, : layout.count].any(axis=(0, 2))
+    keep |= (vc.reshape(-1, ts)[: layout.count] > 0).any(axis=1)
+    if keep.all():
+        return probe
+    pruned, order = layout.select(keep)
+    return Level(pruned, spacing, reorder(vc, order, ts), reorder(ve, order, ts), reorder(vf, order, ts), lam, mu)

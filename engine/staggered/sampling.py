@@ -1,0 +1,264 @@
+"""Sampling the staggered displacement at points, and surface loads consistent with that sampling.
+
+Displacement component ``a`` lives on the a-faces: sample ``(a, I)`` at ``origin + h (I + 0.5 -
+0.5 e_a)``. Between samples it is read by multilinear interpolation on that shifted lattice
+(``stencil``); inside the material only active samples count, their weights renormalised
+(``interpolate``). A traction ``t`` on the surface becomes nodal forces by the transpose of the same
+interpolation, ``f_a(I) = sum_q w_q t_a(x_q) phi_{a,I}(x_q)``, so that ``sum f . u`` is the
+quadrature of ``integral t . u_h dA``: the load does work on exactly the displacement the output
+reports, and a constant traction keeps its total force.
+
+Surface integrals use a degree-5 Gauss rule on pieces no longer than h/2 (``surface_quadrature``);
+``boundary_tractions`` turns a traction / pressure / stress boundary condition on a region of the
+surface into quadrature points, weights and traction vectors.
+
+Units: positions [m], tractions, pressures and stresses [Pa], weights [m^2] (3D) or [m] (2D), forces
+[N] (2D: per unit thickness, [N/m]).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import VoxelasticError
+from ..geometry.surface import Surface
+from ..grid import Grid
+from ..regions import Region, _subdivide, require_selection
+
+# lookup(a, index [M, d] int64) -> (values [M], active [M] bool); index always inside the index box.
+Lookup = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
+# active(a, index [M, d] int64) -> bool [M]; index always inside the index box.
+Active = Callable[[int, np.ndarray], np.ndarray]
+
+
+def stencil(grid: Grid, points: np.ndarray, a: int) -> tuple[np.ndarray, np.ndarray]:
+    """Multilinear interpolation stencil of displacement component ``a`` at ``points`` [N, d] [m].
+
+    The lattice is that of the a-face samples, ``origin + h (I + 0.5 - 0.5 e_a)``. Returns
+    (index [N, 2^d, d] int64, weights [N, 2^d] >= 0, each row summing to 1). Indices may fall
+    outside the index box [0, n + 1)^d when a point is within h/2 of the grid's edge; callers treat
+    those samples as inactive.
+    """
+    d = grid.dim
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != d:
+        raise ValueError(f"points: expected shape [N, {d}], got {points.shape}")
+    if not 0 <= a < d:
+        raise ValueError(f"component: expected 0 <= a < {d}, got {a}")
+    shift = 0.5 - 0.5 * np.eye(d)[a]
+    xi = (points - np.asarray(grid.origin)) / grid.spacing - shift  # lattice coordinates
+    base = np.floor(xi)
+    frac = xi - base
+    corners = np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)  # [2^d, d]
+    index = base.astype(np.int64)[:, None, :] + corners[None]
+    weights = np.where(corners[None] == 1, frac[:, None, :], 1.0 - frac[:, None, :]).prod(axis=2)
+    return index, weights
+
+
+def interpolate(grid: Grid, points: np.ndarray, lookup: Lookup) -> np.ndarray:
+    """Displacement [N, d] [m] at ``points`` [N, d] from the staggered values, restricted to material.
+
+    ``lookup(a, index [M, d]) -> (values [M] [m], active [M] bool)`` reads component ``a``; it is
+    only called with indices inside the index box (samples outside it are inactive). Weights of
+    inactive samples are dropped and the rest renormalised, so constants are reproduced wherever
+    any sample is active; a component with no active sample at a point is NaN.
+    """
+    points = np.asarray(points, dtype=float)
+    out = np.empty((len(points), grid.dim))
+    for a in range(grid.dim):
+        index, weights = stencil(grid, points, a)
+        values, active = _read(grid, index, a, lookup)
+        weights = np.where(active, weights, 0.0)
+        total = weights.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[:, a] = (weights * np.where(active, values, 0.0)).sum(axis=1) / total
+    return out
+
+
+def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
+    as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
+
+    Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided by edge midpoints until none
+    is, so each piece crosses few cells of the piecewise-multilinear interpolant; on each piece a
+    degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates. Zero-area
+    pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
+    area / length to round-off) and unit outward normals [Q, d].
+    """
+    facets = np.asarray(facets, dtype=float)
+    if facets.ndim != 3 or facets.shape[1] != facets.shape[2] or facets.shape[2] not in (2, 3):
+        raise ValueError(f"facets: expected shape [M, d, d] with d = 2 or 3, got {facets.shape}")
+    if not (math.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
+    d = facets.shape[2]
+    facets = _refine(facets, 0.5 * spacing)
+    measure, normals = _measure_and_normal(facets)
+    keep = measure > 0
+    facets, measure, normals = facets[keep], measure[keep], normals[keep]
+    bary, rule = _gauss_rule(d)
+    points = np.einsum("qk,fkj->fqj", bary, facets).reshape(-1, d)
+    weights = (measure[:, None] * rule[None, :]).ravel()
+    normals = np.repeat(normals, len(rule), axis=0)
+    return points, weights, normals
+
+
+def surface_loads(
+    grid: Grid,
+    points: np.ndarray,
+    weights: np.ndarray,
+    tractions: np.ndarray,
+    active: Active | None = None,
+    *,
+    name: str = "surface load",
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Consistent load vector of tractions [Q, d] [Pa] at quadrature ``points`` [Q, d] with ``weights`` [Q].
+
+    Per component ``a``: (index [K, d] int64, unique; force [K] [N]) with
+    ``force(I) = sum_q w_q t_a(x_q) phi_{a,I}(x_q)`` -- the transpose of ``stencil``, so
+    ``sum f . u = sum_q w_q t(x_q) . u_h(x_q)`` for the multilinear interpolant ``u_h``. Only samples
+    of nonzero stencil weight appear; they can lie outside the index box for points within h/2 of
+    the grid's edge.
+
+    With ``active(a, index [M, d]) -> bool [M]`` the transpose of ``interpolate`` is used instead:
+    inactive samples are dropped and the rest renormalised, so no force is lost on inactive DOFs
+    (sum_I f_a(I) = sum_q w_q t_a exactly) and only active indices are returned. A point with a
+    nonzero traction component but no active sample raises an error naming ``name``.
+    """
+    points = np.asarray(points, dtype=float)
+    weights = np.asarray(weights, dtype=float)
+    tractions = np.asarray(tractions, dtype=float)
+    d = grid.dim
+    if weights.shape != (len(points),) or tractions.shape != (len(points), d):
+        raise ValueError(
+            f"{name}: expected weights [{len(points)}] and tractions [{len(points)}, {d}], "
+            f"got {weights.shape} and {tractions.shape}"
+        )
+    loads = []
+    for a in range(d):
+        index, phi = stencil(grid, points, a)
+        load = weights * tractions[:, a]
+        if active is not None:
+            is_active = _read(grid, index, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+            phi = np.where(is_active, phi, 0.0)
+            total = phi.sum(axis=1)
+            lost = (total == 0) & (load != 0)
+            if lost.any():
+                raise VoxelasticError(
+                    f"{name}: {int(lost.sum())} surface quadrature points carrying "
+                    f"{np.abs(load[lost]).sum():.6g} N of force along axis {a} have no active displacement "
+                    "sample nearby; the surface lies outside the material the grid resolves"
+                )
+            phi = phi / np.where(total > 0, total, 1.0)[:, None]
+        keep = phi > 0
+        unique, inverse = np.unique(index[keep], axis=0, return_inverse=True)
+        force = np.bincount(inverse.ravel(), weights=(load[:, None] * phi)[keep], minlength=len(unique))
+        loads.append((unique.reshape(-1, d).astype(np.int64), force))
+    return loads
+
+
+def boundary_tractions(
+    surface: Surface,
+    region: Region,
+    spacing: float,
+    *,
+    name: str,
+    traction: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+    pressure: float | None = None,
+    stress: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadrature of a surface load on the part of ``surface`` inside ``region``.
+
+    Exactly one of: ``traction`` a constant vector [d] [Pa] or a callable points [Q, d] -> [Q, d];
+    ``pressure`` p [Pa], traction -p n (positive pressure pushes into the surface); ``stress`` a
+    constant Cauchy stress [d, d] [Pa] or a callable points [Q, d] -> [Q, d, d], traction sigma n
+    (manufactured solutions). ``spacing`` is the grid's h [m] (sets the subdivision). ``name``
+    names the boundary condition in errors; a region that selects no surface of positive area is
+    one. Returns points [Q, d] [m], weights [Q] [m^2 | m] and tractions [Q, d] [Pa].
+    """
+    given = [k for k, v in (("traction", traction), ("pressure", pressure), ("stress", stress)) if v is not None]
+    if len(given) != 1:
+        raise ValueError(f"{name}: give exactly one of traction, pressure or stress, got {given or 'none'}")
+    d = surface.dim
+    pieces, _ = region.clip(surface.vertices[surface.faces])
+    points, weights, normals = surface_quadrature(pieces.reshape(-1, d, d), spacing)
+    require_selection(len(weights), "surface", name)
+    q = len(points)
+    if pressure is not None:
+        t = -float(pressure) * normals
+    elif stress is not None:
+        sigma = np.asarray(stress(points) if callable(stress) else stress, dtype=float)
+        sigma = np.broadcast_to(sigma, (q, d, d)) if sigma.shape == (d, d) else sigma
+        if sigma.shape != (q, d, d):
+            raise ValueError(f"{name}.stress: expected [{d}, {d}] or [{q}, {d}, {d}], got {sigma.shape}")
+        t = np.einsum("qij,qj->qi", sigma, normals)
+    else:
+        t = np.asarray(traction(points) if callable(traction) else traction, dtype=float)
+        t = np.broadcast_to(t, (q, d)) if t.shape == (d,) else t
+        if t.shape != (q, d):
+            raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}: the traction is not finite at some surface points")
+    return points, weights, np.array(t)
+
+
+def _read(grid: Grid, index: np.ndarray, a: int, lookup: Lookup) -> tuple[np.ndarray, np.ndarray]:
+    """Values and activity [N, k] of stencil samples ``index`` [N, k, d]; outside the box: inactive."""
+    flat = index.reshape(-1, grid.dim)
+    inside = np.all((flat >= 0) & (flat <= np.asarray(grid.shape)), axis=1)  # index box [0, n + 1)
+    values = np.zeros(len(flat))
+    active = np.zeros(len(flat), dtype=bool)
+    if inside.any():
+        v, act = lookup(a, flat[inside])
+        values[inside] = v
+        active[inside] = act
+    return values.reshape(index.shape[:2]), active.reshape(index.shape[:2])
+
+
+def _refine(facets: np.ndarray, longest: float) -> np.ndarray:
+    """Midpoint-subdivide facets [M, d, d] until every edge is at most ``longest`` [m]."""
+    done = []
+    while len(facets):
+        edges = facets - np.roll(facets, 1, axis=1)  # every edge of a triangle; the segment twice
+        long = np.linalg.norm(edges, axis=2).max(axis=1) > longest
+        done.append(facets[~long])
+        facets = _subdivide(facets[long])
+    return np.concatenate(done) if done else facets
+
+
+def _measure_and_normal(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Area / length [M] and unit outward normal [M, d] of simplices [M, d, d] (zero normal if degenerate).
+
+    The area vector is the generalised cross product of the d - 1 edge vectors: component k is the
+    determinant of the edges stacked over e_k, signed (-1)^(d+1) so that it points out in both
+    conventions (3D right-hand rule, 2D solid on the left); its length is (d - 1)! times the measure.
+    """
+    m, d = facets.shape[0], facets.shape[2]
+    edges = facets[:, 1:] - facets[:, :1]  # [M, d-1, d]
+    rows = np.broadcast_to(np.eye(d)[None, :, None, :], (m, d, 1, d))
+    stacked = np.concatenate([np.broadcast_to(edges[:, None], (m, d, d - 1, d)), rows], axis=2)
+    area_vector = (-1) ** (d + 1) * np.linalg.det(stacked)  # [M, d]
+    norm = np.linalg.norm(area_vector, axis=1)
+    normals = area_vector / np.where(norm > 0, norm, 1.0)[:, None]
+    return norm / math.factorial(d - 1), normals
+
+
+def _gauss_rule(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Degree-5 rule on the reference simplex of a (d-1)-dimensional facet: barycentric points [q, d]
+    and weights [q] summing to 1 (fractions of the facet's measure)."""
+    if d == 2:
+        x, w = np.polynomial.legendre.leggauss(3)
+        t = 0.5 * (1.0 + x)
+        return np.stack([1.0 - t, t], axis=1), 0.5 * w
+    r = math.sqrt(15.0)
+    points, weights = [np.full(3, 1.0 / 3.0)], [9.0 / 40.0]
+    for c, w in (((6.0 - r) / 21.0, (155.0 - r) / 1200.0), ((6.0 + r) / 21.0, (155.0 + r) / 1200.0)):
+        for k in range(3):
+            p = np.full(3, c)
+            p[k] = 1.0 - 2.0 * c
+            points.append(p)
+            weights.append(w)
+    return np.array(points), np.array(weights)

@@ -1,0 +1,258 @@
+"""Staggered sampling: multilinear stencils, masked interpolation, surface quadrature, consistent loads."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from engine.errors import VoxelasticError
+from engine.grid import Grid
+from engine.regions import Ball, Halfspaces
+from engine.staggered.sampling import (
+    boundary_tractions,
+    interpolate,
+    stencil,
+    surface_loads,
+    surface_quadrature,
+)
+from tests.conftest import polygon_surface_2d, surface_of
+
+GRIDS = {
+    2: Grid(origin=(-0.7, 0.3), spacing=0.25, shape=(7, 5)),
+    3: Grid(origin=(-0.7, 0.3, -0.2), spacing=0.25, shape=(5, 4, 6)),
+}
+
+
+def sample_positions(grid, a):
+    """Positions [n+1..., d] of every component-a sample of the index box."""
+    box = np.asarray(grid.shape) + 1
+    index = np.stack(np.meshgrid(*[np.arange(n) for n in box], indexing="ij"), axis=-1).reshape(-1, grid.dim)
+    return grid.sample_points(index, np.eye(grid.dim)[a]).reshape(*box, grid.dim)
+
+
+def affine_field(grid, rng):
+    """Random affine u(x) = c + G x, its dense staggered samples per component, and u itself."""
+    d = grid.dim
+    c, g = rng.normal(size=d), rng.normal(size=(d, d))
+    samples = [sample_positions(grid, a) @ g[a] + c[a] for a in range(d)]
+    return samples, lambda x: x @ g.T + c
+
+
+def interior_points(grid, rng, n):
+    """Random points at least h from the grid's edge (their stencils lie in the index box)."""
+    lo = np.asarray(grid.origin) + grid.spacing
+    return lo + rng.random((n, grid.dim)) * (grid.upper - grid.spacing - lo)
+
+
+def dense_lookup(samples, masks=None):
+    def lookup(a, index):
+        assert np.all(index >= 0) and np.all(index < samples[a].shape), "lookup called outside the index box"
+        at = tuple(index.T)
+        return samples[a][at], (np.ones(len(index), bool) if masks is None else masks[a][at])
+
+    return lookup
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_stencil_reproduces_affine_fields_exactly(d, rng):
+    grid = GRIDS[d]
+    samples, u = affine_field(grid, rng)
+    points = interior_points(grid, rng, 200)
+    for a in range(d):
+        index, weights = stencil(grid, points, a)
+        assert index.shape == (200, 2**d, d) and weights.shape == (200, 2**d)
+        assert np.all(weights >= 0)
+        np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=0, atol=1e-14)
+        value = (weights * samples[a][tuple(np.moveaxis(index, -1, 0))]).sum(axis=1)
+        np.testing.assert_allclose(value, u(points)[:, a], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(interpolate(grid, points, dense_lookup(samples)), u(points), rtol=0, atol=1e-12)
+
+
+def test_stencil_at_a_sample_is_that_sample_and_may_leave_the_box():
+    grid = GRIDS[3]
+    at = grid.sample_points(np.array([[2, 1, 3]]), (0, 1, 0))  # component-1 sample (2, 1, 3)
+    index, weights = stencil(grid, at, 1)
+    np.testing.assert_array_equal(index[0, np.argmax(weights[0])], [2, 1, 3])
+    assert weights.max() == pytest.approx(1.0, abs=1e-14)
+    corner, _ = stencil(grid, np.asarray(grid.origin)[None] + 0.1 * grid.spacing, 0)
+    assert corner.min() == -1  # within h/2 of the grid's edge: callers treat index -1 as inactive
+
+
+def test_interpolate_renormalises_over_active_samples_and_gives_nan_without_any():
+    grid = GRIDS[2]
+    samples = [np.arange(8 * 6, dtype=float).reshape(8, 6)] * 2
+    # The point halfway between component-0 samples (2,1), (3,1), (2,2), (3,2): weights 1/4 each.
+    point = 0.25 * sum(grid.sample_points(np.array([i]), (1, 0))[0] for i in ((2, 1), (3, 1), (2, 2), (3, 2)))
+    masks = [np.ones((8, 6), bool), np.zeros((8, 6), bool)]
+    masks[0][3, 2] = False
+    value = interpolate(grid, point[None], dense_lookup(samples, masks))[0]
+    assert value[0] == pytest.approx((samples[0][2, 1] + samples[0][3, 1] + samples[0][2, 2]) / 3, abs=1e-13)
+    assert math.isnan(value[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_interpolate_reproduces_constants_on_any_active_subset(d, rng):
+    grid = GRIDS[d]
+    box = tuple(np.asarray(grid.shape) + 1)
+    constant = rng.normal(size=d)
+    samples = [np.full(box, constant[a]) for a in range(d)]
+    masks = [rng.random(box) < 0.4 for _ in range(d)]
+    # Points everywhere, including within h/2 of the edge (stencil indices -1 are never looked up).
+    points = np.asarray(grid.origin) + rng.random((400, d)) * (grid.upper - np.asarray(grid.origin))
+    value = interpolate(grid, points, dense_lookup(samples, masks))
+    for a in range(d):
+        index, weights = stencil(grid, points, a)
+        inside = np.all((index >= 0) & (index < np.asarray(box)), axis=2)
+        active = np.zeros_like(inside)
+        active[inside] = masks[a][tuple(index[inside].T)]
+        some = (active & (weights > 0)).any(axis=1)
+        assert some.sum() > 100 and (~some).sum() > 0
+        np.testing.assert_allclose(value[some, a], constant[a], rtol=1e-14)
+        assert np.all(np.isnan(value[~some, a]))
+
+
+def test_quadrature_of_an_icosphere_is_exact_for_area_normals_and_volume():
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    facets = mesh.vertices[mesh.faces]
+    longest = np.linalg.norm(facets - np.roll(facets, 1, axis=1), axis=2).max(axis=1)
+    assert longest.min() > 0.6 * longest.max()
+    points, weights, normals = surface_quadrature(facets, spacing=1.01 * longest.max())
+    assert len(weights) == 7 * 4 * len(facets)  # every facet longer than h/2, its quarters not
+    assert weights.sum() == pytest.approx(mesh.area, rel=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, rtol=0, atol=1e-14)
+    np.testing.assert_allclose((weights[:, None] * normals).sum(axis=0), 0.0, atol=1e-13)
+    flux = (weights * np.einsum("qi,qi->q", points, normals)).sum()
+    assert flux == pytest.approx(3 * mesh.volume, rel=1e-12)  # divergence theorem, div x = 3
+    assert np.all(np.einsum("qi,qi->q", points, normals) > 0)  # outward on a convex body around 0
+
+
+def test_triangle_rule_is_exact_to_degree_five_with_and_without_subdivision():
+    ref = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    for spacing in (10.0, 0.1):  # the raw rule, and 4^5 pieces
+        points, weights, normals = surface_quadrature(ref, spacing)
+        x, y = points[:, 0], points[:, 1]
+        assert (weights * x**2).sum() == pytest.approx(1 / 12, rel=1e-13)  # 2! / 4!
+        assert (weights * x**3 * y**2).sum() == pytest.approx(1 / 420, rel=1e-12)  # 3! 2! / 7!
+        np.testing.assert_allclose(normals, np.broadcast_to([0.0, 0.0, 1.0], normals.shape), atol=1e-15)
+    # A general triangle in space: integral of x^2 = A/6 (sum x_i^2 + sum_{i<j} x_i x_j).
+    tri = np.array([[[0.3, -0.2, 1.0], [1.7, 0.4, 0.2], [-0.5, 1.1, 0.6]]])
+    points, weights, _ = surface_quadrature(tri, 100.0)
+    xs = tri[0, :, 0]
+    area = 0.5 * np.linalg.norm(np.cross(tri[0, 1] - tri[0, 0], tri[0, 2] - tri[0, 0]))
+    exact = area / 6 * ((xs**2).sum() + xs[0] * xs[1] + xs[1] * xs[2] + xs[2] * xs[0])
+    assert (weights * points[:, 0] ** 2).sum() == pytest.approx(exact, rel=1e-13)
+
+
+def test_segment_rule_lengths_normals_and_degree():
+    square = polygon_surface_2d(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]))
+    points, weights, normals = surface_quadrature(square.vertices[square.faces], spacing=0.3)
+    assert weights.sum() == pytest.approx(6.0, rel=1e-14)
+    np.testing.assert_allclose((weights[:, None] * normals).sum(axis=0), 0.0, atol=1e-14)
+    assert (weights * np.einsum("qi,qi->q", points, normals)).sum() == pytest.approx(2 * 2.0, rel=1e-14)
+    bottom = points[:, 1] == 0.0
+    np.testing.assert_allclose(normals[bottom], np.broadcast_to([0.0, -1.0], normals[bottom].shape))
+    assert weights[bottom].max() == pytest.approx(4 / 9 * 2.0 / 16, rel=1e-14)  # 2 m halved to <= h/2
+    seg = np.array([[[0.0, 0.0], [1.0, 0.0]]])
+    points, weights, _ = surface_quadrature(seg, 10.0)
+    assert (weights * points[:, 0] ** 5).sum() == pytest.approx(1 / 6, rel=1e-14)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_surface_loads_are_the_transpose_of_the_stencil(d, rng):
+    grid = GRIDS[d]
+    samples, u = affine_field(grid, rng)
+    points = interior_points(grid, rng, 300)
+    weights = rng.random(300) * 0.01
+    tractions = rng.normal(size=(300, d)) * 1e3
+    loads = surface_loads(grid, points, weights, tractions)
+    work = sum((f * samples[a][tuple(index.T)]).sum() for a, (index, f) in enumerate(loads))
+    direct = (weights * np.einsum("qi,qi->q", tractions, u(points))).sum()
+    assert work == pytest.approx(direct, rel=1e-12)
+    for index, f in loads:
+        assert len(np.unique(index, axis=0)) == len(index) < 300 * 2**d  # shared samples are summed
+    constant = np.broadcast_to(rng.normal(size=d), (300, d))
+    for a, (_, f) in enumerate(surface_loads(grid, points, weights, constant)):
+        assert f.sum() == pytest.approx(constant[0, a] * weights.sum(), rel=1e-13)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_masked_surface_loads_are_the_transpose_of_interpolate(d, rng):
+    grid = GRIDS[d]
+    box = tuple(np.asarray(grid.shape) + 1)
+    samples, _ = affine_field(grid, rng)
+    masks = [rng.random(box) < 0.7 for _ in range(d)]
+    points = interior_points(grid, rng, 300)
+    weights, tractions = rng.random(300), rng.normal(size=(300, d))
+    u_h = interpolate(grid, points, dense_lookup(samples, masks))
+    carried = ~np.isnan(u_h).any(axis=1)
+    points, weights, tractions, u_h = points[carried], weights[carried], tractions[carried], u_h[carried]
+    loads = surface_loads(grid, points, weights, tractions, lambda a, index: masks[a][tuple(index.T)])
+    for a, (index, f) in enumerate(loads):
+        assert masks[a][tuple(index.T)].all()
+        assert f.sum() == pytest.approx((weights * tractions[:, a]).sum(), rel=1e-12)  # no force lost
+    work = sum((f * samples[a][tuple(index.T)]).sum() for a, (index, f) in enumerate(loads))
+    assert work == pytest.approx((weights * np.einsum("qi,qi->q", tractions, u_h)).sum(), rel=1e-12)
+    nothing = [np.zeros(box, bool)] * d
+    with pytest.raises(VoxelasticError, match="rim load: 1 surface quadrature points"):
+        inactive = lambda a, i: nothing[a][tuple(i.T)]  # noqa: E731
+        surface_loads(grid, points[:1], weights[:1], tractions[:1], inactive, name="rim load")
+
+
+def test_pressure_on_a_sphere_balances_and_on_a_cap_gives_the_projected_area():
+    radius, p = 0.8, 2.5e3
+    sphere = surface_of(trimesh.creation.icosphere(subdivisions=5, radius=radius))
+    everything = Ball(np.zeros(3), 2.0)
+    _, weights, t = boundary_tractions(sphere, everything, 0.1, pressure=p, name="all around")
+    total_area = weights.sum()
+    np.testing.assert_allclose((weights[:, None] * t).sum(axis=0), 0.0, atol=1e-12 * p * total_area)
+    upper = Halfspaces(np.array([[0.0, 0.0, -1.0]]), np.array([0.0]))
+    points, weights, t = boundary_tractions(sphere, upper, 0.1, pressure=p, name="lid")
+    assert points[:, 2].min() >= 0.0
+    force = (weights[:, None] * t).sum(axis=0)
+    assert np.linalg.norm(force) == pytest.approx(p * math.pi * radius**2, rel=1e-3)
+    assert force[2] < 0 and np.abs(force[:2]).max() < 1e-12 * p  # pushes into the upper cap
+    # A constant traction sums to itself times the cap's area.
+    _, w2, t2 = boundary_tractions(sphere, upper, 0.1, traction=[1.0, -2.0, 3.0], name="lid")
+    np.testing.assert_allclose((w2[:, None] * t2).sum(axis=0), np.array([1.0, -2.0, 3.0]) * weights.sum(), rtol=1e-13)
+
+
+def test_pressure_on_a_half_circle_in_2d():
+    radius, p, n = 0.5, 7.0, 2000
+    angle = 2 * np.pi * np.arange(n) / n
+    circle = polygon_surface_2d(radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
+    upper = Halfspaces(np.array([[0.0, -1.0]]), np.array([0.0]))
+    _, weights, t = boundary_tractions(circle, upper, 0.05, pressure=p, name="top")
+    force = (weights[:, None] * t).sum(axis=0)
+    assert force[1] == pytest.approx(-p * 2 * radius, rel=1e-12)  # vertices at +-r: chord exactly 2r
+    assert abs(force[0]) < 1e-12
+
+
+def test_stress_loads_obey_the_divergence_theorem():
+    # sigma(x) = x_0 I has div sigma = e_0, so the closed-surface integral of sigma n is volume * e_0.
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=1.3)
+    ball = surface_of(mesh)
+    stress = lambda x: x[:, 0, None, None] * np.eye(3)  # noqa: E731
+    _, weights, t = boundary_tractions(ball, Ball(np.zeros(3), 5.0), 0.2, stress=stress, name="manufactured")
+    np.testing.assert_allclose((weights[:, None] * t).sum(axis=0), [mesh.volume, 0.0, 0.0], atol=1e-12)
+    points, weights, t_callable = boundary_tractions(
+        ball, Ball(np.zeros(3), 5.0), 0.2, traction=lambda x: x[:, 0, None] * np.array([1.0, 0.0, 0.0]), name="x"
+    )
+    np.testing.assert_allclose(t_callable[:, 0], points[:, 0])
+    sigma = np.array([[1.0, 2.0, 0.0], [2.0, -1.0, 0.5], [0.0, 0.5, 3.0]])
+    _, _, t_const = boundary_tractions(ball, Ball(np.zeros(3), 5.0), 0.2, stress=sigma, name="const")
+    _, _, normals = surface_quadrature(ball.vertices[ball.faces], 0.2)
+    np.testing.assert_allclose(t_const, normals @ sigma.T, atol=1e-15)
+    _, _, t_p = boundary_tractions(ball, Ball(np.zeros(3), 5.0), 0.2, pressure=4.0, name="p")
+    np.testing.assert_allclose(t_p, -4.0 * normals, atol=1e-15)
+
+
+def test_boundary_conditions_that_select_nothing_or_are_ambiguous_are_errors():
+    sphere = surface_of(trimesh.creation.icosphere(subdivisions=1))
+    far = Ball(np.array([10.0, 0.0, 0.0]), 0.5)
+    with pytest.raises(VoxelasticError, match="clamp plate: the region selects no surface"):
+        boundary_tractions(sphere, far, 0.1, pressure=1.0, name="clamp plate")
+    with pytest.raises(ValueError, match="push: give exactly one of traction, pressure or stress"):
+        boundary_tractions(sphere, far, 0.1, pressure=1.0, traction=[0, 0, 1], name="push")
+    with pytest.raises(ValueError, match="push.traction: expected"):
+        boundary_tractions(sphere, Ball(np.zeros(3), 5.0), 0.1, traction=[0, 1], name="push")
