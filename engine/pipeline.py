@@ -199,7 +199,8 @@ class Functions:
 
     body_force -> [N, d] [N/m^3] replaces loads.gravity; displacement[name] -> [N, d] [m] and
     traction[name] -> [N, d] [Pa] replace the value of the boundary with that name; stress[name] ->
-    [N, d, d] [Pa] makes a traction boundary apply sigma n; regions[name] -> bool [N] replaces that
+    [N, d, d] [Pa] makes a traction boundary apply sigma n, on the surface triangles (stress_form
+    "quadrature") or as the volume form of thesis eq. 4.16 ("divergence"); regions[name] -> bool [N] replaces that
     boundary's region (membership of DOF samples; a surface facet counts when its centroid does).
     """
 
@@ -208,6 +209,8 @@ class Functions:
     traction: dict[str, Callable] = field(default_factory=dict)
     stress: dict[str, Callable] = field(default_factory=dict)
     regions: dict[str, Callable] = field(default_factory=dict)
+    stress_form: str = "quadrature"  # how a stress field becomes loads: "quadrature" or "divergence"
+    pressure_form: str = "divergence"  # how a pressure becomes loads (sigma = -p I in the divergence form)
 
 
 def run(

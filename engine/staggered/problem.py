@@ -46,11 +46,11 @@ def make_staggered(spec, geo, functions) -> StaggeredElasticity:
             prescribed.append(Prescribed(region, value, name, components))
         elif b.kind == "traction":
             if name in functions.stress:
-                loads.append(SurfaceLoad(region, name, stress=functions.stress[name]))
+                loads.append(SurfaceLoad(region, name, stress=functions.stress[name], form=functions.stress_form))
             else:
                 loads.append(SurfaceLoad(region, name, traction=functions.traction.get(name, np.asarray(b.value, dtype=float))))
         else:
-            loads.append(SurfaceLoad(region, name, pressure=float(b.value)))
+            loads.append(SurfaceLoad(region, name, pressure=float(b.value), form=functions.pressure_form))
     body = functions.body_force
     if body is None and spec.loads.gravity is not None and any(g != 0 for g in spec.loads.gravity):
         body = material.density * np.asarray(spec.loads.gravity, dtype=float)

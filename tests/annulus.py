@@ -1,0 +1,129 @@
+"""The 2D annulus manufactured solution of Dolny (2025) section 5.1, shared by tests and benchmarks.
+
+mu = lambda = 1, u = (cos 2pi x cos 2pi y, sin 2pi x sin 2pi y) (divergence-free), so the body force
+is b = -div sigma = 8 pi^2 u. Radii 0.325 / 0.8 in a domain of width 2 (h = 2 / N).
+
+Errors: see :func:`errors` (at cell centres like the thesis, and at the staggered samples).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.geometry.cache import GeometryCache
+from engine.pipeline import Functions, run
+
+INNER, OUTER = 0.325, 0.8
+TWO_PI = 2 * np.pi
+
+
+def exact(x: np.ndarray) -> np.ndarray:
+    return np.stack([np.cos(TWO_PI * x[:, 0]) * np.cos(TWO_PI * x[:, 1]), np.sin(TWO_PI * x[:, 0]) * np.sin(TWO_PI * x[:, 1])], axis=1)
+
+
+def body_force(x: np.ndarray) -> np.ndarray:
+    return 2 * TWO_PI**2 * exact(x)
+
+
+def exact_stress(x: np.ndarray) -> np.ndarray:
+    """sigma [N, 2, 2]: eps_xy = 0 and tr eps = 0, so sigma = 2 eps = diag(-1, 1) 4 pi sin 2pi x cos 2pi y."""
+    s = 2 * TWO_PI * np.sin(TWO_PI * x[:, 0]) * np.cos(TWO_PI * x[:, 1])
+    out = np.zeros((len(x), 2, 2))
+    out[:, 0, 0], out[:, 1, 1] = -s, s
+    return out
+
+
+def circle(radius: float, n: int = 4096) -> list[list[float]]:
+    t = np.linspace(0, TWO_PI, n, endpoint=False)
+    return np.stack([radius * np.cos(t), radius * np.sin(t)], axis=1).tolist()
+
+
+def material() -> dict:
+    # E and nu with lambda = mu = 1: nu = 1/4, E = 2 mu (1 + nu) = 2.5
+    return {"youngs_modulus": 2.5, "poisson_ratio": 0.25}
+
+
+def dirichlet_spec(n: int) -> dict:
+    """Whole 2x2 domain solid, every sample outside the annulus prescribed: standard staggered
+    finite differences inside (the thesis' all-Dirichlet problem)."""
+    square = [[-1, -1], [1, -1], [1, 1], [-1, 1]]
+    return {
+        "dimension": 2,
+        "geometry": {"polygon": [square]},
+        "grid": {"resolution": n, "padding": 0},
+        "material": material(),
+        "boundaries": [{"kind": "displacement", "name": "outside", "region": {"all": True}, "value": [0, 0]}],
+        "solver": {"rtol": 1e-11},
+        "output": {"fields": ["displacement"], "surface": False},
+    }
+
+
+def traction_spec(n: int) -> dict:
+    """Disc of radius 0.8 with the samples inside radius 0.325 prescribed and the exact traction
+    sigma n on the whole outer circle."""
+    return {
+        "dimension": 2,
+        "geometry": {"polygon": [circle(OUTER)]},
+        "grid": {"cell_size": 2.0 / n, "padding": 1},
+        "material": material(),
+        "boundaries": [
+            {"kind": "displacement", "name": "inner", "region": {"sphere": {"center": [0, 0], "radius": INNER}}, "value": [0, 0]},
+            {"kind": "traction", "name": "outer", "region": {"all": True}, "value": [0, 0]},
+        ],
+        "solver": {"rtol": 1e-11},
+        "output": {"fields": ["displacement"], "surface": False},
+    }
+
+
+def solve(kind: str, n: int, form: str = "quadrature"):
+    """(method, state) of one problem at resolution n (N cells across the width-2 domain)."""
+    from engine.pipeline import prepare_geometry
+    from engine.staggered.problem import make_staggered
+    from schemas import parse_job
+    from engine.runtime import init
+
+    init("cpu", "f64")
+    if kind == "dirichlet":
+        spec = parse_job(dirichlet_spec(n))
+        fn = Functions(
+            body_force=body_force,
+            displacement={"outside": exact},
+            regions={"outside": lambda x: ~((np.hypot(x[:, 0], x[:, 1]) > INNER) & (np.hypot(x[:, 0], x[:, 1]) < OUTER))},
+        )
+    else:
+        spec = parse_job(traction_spec(n))
+        fn = Functions(body_force=body_force, displacement={"inner": exact}, stress={"outer": exact_stress}, stress_form=form)
+    geo = prepare_geometry(spec, cache=GeometryCache(None))
+    method = make_staggered(spec, geo, fn)
+    return method, method.solve()
+
+
+def errors(kind: str, n: int, form: str = "quadrature") -> dict:
+    """Errors at resolution n; ``form``: how the traction becomes loads.
+
+    "cells": (L1, L_inf) of the cell-centre displacement (the result's field: the mean of each
+    cell's two face samples) as a vector norm, over cells whose centre lies in the annulus; L1 =
+    h^2 sum |e| (the thesis' Table 5.2 matches this measure). "samples": (L1, L_inf) of each
+    component at its own free samples inside the annulus, L1 = h^2 sum |e|. "iterations": CG.
+    """
+    method, state = solve(kind, n, form)
+    h = method.grid.spacing
+    a, p, x = method.dof_comp, method.dof_pos, method.dof_points
+    r = np.hypot(x[:, 0], x[:, 1])
+    free = method.level.free[a, p] & (r > INNER) & (r < OUTER)
+    e = np.abs(state.u[a[free], p[free]] - exact(x[free])[np.arange(int(free.sum())), a[free]])
+    disp = method.cell_fields(state.u, ["displacement"])["displacement"].reshape(-1, 2)
+    g = method.grid
+    xc = np.stack(np.meshgrid(*[g.axis_coordinates(k) for k in range(2)], indexing="ij"), -1).reshape(-1, 2)
+    rc = np.hypot(xc[:, 0], xc[:, 1])
+    inside = (rc > INNER) & (rc < OUTER)
+    ec = np.linalg.norm(disp[inside] - exact(xc[inside]), axis=1)
+    return {
+        "cells": (float(h**2 * ec.sum()), float(ec.max())),
+        "samples": (float(h**2 * e.sum()), float(e.max())),
+        "iterations": state.stats.iterations,
+    }
+
+
+def order(ns, values) -> float:
+    return float(-np.polyfit(np.log(ns), np.log(values), 1)[0])
