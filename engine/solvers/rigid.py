@@ -18,6 +18,8 @@ from ..errors import VoxelasticError
 BALANCE_TOLERANCE = 1e-6
 # A mode is pinned when the Dirichlet DOFs see it with at least this share of its norm.
 PIN_TOLERANCE = 1e-10
+# Singular values below this (relative) mean the free modes are dependent on the body's DOFs.
+RANK_TOLERANCE = 1e-8
 
 
 class UnbalancedLoadError(VoxelasticError):
@@ -59,9 +61,12 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
         if loose.shape[1] == 0:
             continue
         free_dofs = np.nonzero(on & ~fixed)[0]
-        basis = modes[~fixed[on]] @ loose
-        q, _ = np.linalg.qr(basis)
-        out.append((free_dofs, q))
+        # the modes can be dependent on few DOFs (a rotation vanishes at a lone cell's faces): keep
+        # only the directions they really span
+        u, sv, _ = np.linalg.svd(modes[~fixed[on]] @ loose, full_matrices=False)
+        q = u[:, sv > RANK_TOLERANCE * max(1.0, float(sv.max(initial=0.0)))]
+        if q.shape[1]:
+            out.append((free_dofs, q))
     return out
 
 

@@ -25,7 +25,7 @@ from ..solvers.cg import SolveStats, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
-from .operator import Level, device_array, float_type, make_fine_level, pairs
+from .operator import MIN_FRACTION, Level, device_array, float_type, make_fine_level, pairs
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -104,6 +104,11 @@ class StaggeredElasticity:
             self.warnings.append(
                 f"{free} rigid-body mode(s) are not held by any displacement boundary; the loads balance, so the "
                 "solution is the one with no rigid motion (orthogonal to those modes)"
+            )
+        if level.slivers:
+            self.warnings.append(
+                f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
+                f"weight was raised to {MIN_FRACTION:g} (bounds the conditioning; adds at most that share of a cell's energy)"
             )
         self.multigrid = Multigrid(level)
         self.space = _Space(level)
@@ -202,7 +207,7 @@ class StaggeredElasticity:
         """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
         positions a * size + p of those DOFs)."""
         cell = self.level.layout.dense(self.level.vc_host)
-        labels, count = ndi.label(cell > 0, structure=np.ones((3,) * self.dim))
+        labels, count = ndi.label(cell > 0, structure=ndi.generate_binary_structure(self.dim, 2))
         if count == 0:
             return []
         index = self.index[self.dof_pos]

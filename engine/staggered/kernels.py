@@ -222,52 +222,50 @@ def prolongation_weights(d: ti.template(), a: ti.template(), I, corner: ti.i32):
     return J, w
 
 
+@ti.func
+def parent_address(d: ti.template(), parents: ti.types.ndarray(), coords: ti.types.ndarray(), t: ti.i32, J) -> ti.i32:
+    """Flat position of coarse index J, seen from fine tile t: its coarse tile is one of the 3^d
+    around the tile's parent (``parents`` [nt, 3^d], the coarse zero tile where not kept)."""
+    code = 0
+    l = 0
+    for k in ti.static(range(d)):
+        code = code * 3 + (J[k] >> BITS) - (coords[t, k] >> 1) + 1
+        l = l * B + (J[k] & (B - 1))
+    return parents[t, code] * (B**d) + l
+
+
 @ti.kernel
-def prolong_add(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
-                mask: ti.types.ndarray(), coarse_tmap: ti.types.ndarray(), coarse_zero: ti.i32,
-                coarse: ti.types.ndarray(), x: ti.types.ndarray()):
+def prolong_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
+                mask: ti.types.ndarray(), coarse: ti.types.ndarray(), x: ti.types.ndarray()):
     """x += mask P coarse (P: multilinear interpolation of each component on its own faces)."""
-    nt = coords.shape[0]
-    for t, l in ti.ndrange(nt, B**d):
+    for t, l in ti.ndrange(coords.shape[0], B**d):
         I = index_of(d, coords, t, l)
         p = t * (B**d) + l
         for a in ti.static(range(d)):
             v = 0.0
             for corner in range(2**d):
                 J, w = prolongation_weights(d, a, I + 2, corner)
-                v += w * coarse[a, address(d, coarse_tmap, J, coarse_zero)]
+                v += w * coarse[a, parent_address(d, parents, coords, t, J)]
             x[a, p] += mask[a, p] * v
 
 
 @ti.kernel
-def restrict(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
-             mask: ti.types.ndarray(), fine_tmap: ti.types.ndarray(), fine_zero: ti.i32,
-             fine: ti.types.ndarray(), out: ti.types.ndarray()):
-    """out = mask P^T fine: each coarse DOF gathers the fine DOFs its interpolation reaches."""
-    nt = coords.shape[0]
-    for t, l in ti.ndrange(nt, B**d):
-        J = index_of(d, coords, t, l)
+def restrict_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(), zero: ti.i32,
+                 fine: ti.types.ndarray(), out: ti.types.ndarray()):
+    """out += P^T fine, scattered from the fine DOFs with the prolongation's own weights (so the
+    restriction is its exact transpose); nothing lands in the coarse zero tile (``zero``, the
+    coarse tile count). Callers zero ``out`` first and mask it after."""
+    for t, l in ti.ndrange(coords.shape[0], B**d):
+        I = index_of(d, coords, t, l)
         p = t * (B**d) + l
         for a in ti.static(range(d)):
-            v = 0.0
-            # fine support: 3 indices along a (2J-1, 2J, 2J+1), 4 along the others (2J-1 .. 2J+2)
-            for m in range(3 * 4 ** (d - 1)):
-                I = ti.Vector([0] * d, dt=ti.i32)
-                w = 1.0
-                rest = m
-                for k in ti.static(range(d)):
-                    if ti.static(k == a):
-                        o = rest % 3 - 1
-                        rest //= 3
-                        I[k] = 2 * J[k] - 2 + o
-                        w *= ti.select(o == 0, 1.0, 0.5)
-                    else:
-                        o = rest % 4 - 1
-                        rest //= 4
-                        I[k] = 2 * J[k] - 2 + o
-                        w *= ti.select(o == 0 or o == 1, 0.75, 0.25)
-                v += w * fine[a, address(d, fine_tmap, I, fine_zero)]
-            out[a, p] = mask[a, p] * v
+            r = fine[a, p]
+            if r != 0.0:
+                for corner in range(2**d):
+                    J, w = prolongation_weights(d, a, I + 2, corner)
+                    q = parent_address(d, parents, coords, t, J)
+                    if w != 0.0 and q < zero * (B**d):
+                        ti.atomic_add(out[a, q], w * r)
 
 
 @ti.kernel

@@ -58,6 +58,17 @@ class TileLayout:
         out[inside] = self.tile_map[tuple(tiles[inside].T)]
         return out
 
+    def parents(self, coarse: TileLayout) -> np.ndarray:
+        """[count, 3^d] int32: the ``coarse`` layout's tiles around each tile's parent (coords // 2,
+        offsets {-1, 0, 1}^d, code as in :meth:`neighbours`); ``coarse.count`` where not kept."""
+        d = self.dim
+        shifts = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+        tiles = (self.coords.astype(np.int64) // 2)[:, None, :] + shifts[None]
+        inside = np.all((tiles >= 0) & (tiles < np.asarray(coarse.tile_map.shape)), axis=2)
+        out = np.full(inside.shape, coarse.count, dtype=np.int32)
+        out[inside] = coarse.tile_map[tuple(tiles[inside].T)]
+        return out
+
     def positions(self, index: np.ndarray) -> np.ndarray:
         """Flat positions [n] of global indices [n, d]; -1 where the tile is not kept or out of the box."""
         index = np.asarray(index, dtype=np.int64).reshape(-1, self.dim)

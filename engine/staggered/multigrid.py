@@ -21,7 +21,7 @@ from . import assembly, kernels
 from .operator import Level, device_array, float_type, make_coarse_level, pairs
 
 COARSEST_DOFS = 4000  # direct solve below this many unknowns
-DEGREE = 3  # Chebyshev smoothing steps before and after the coarse correction
+DEGREE = 5  # Chebyshev smoothing steps before and after the coarse correction
 # The smoother targets the eigenvalues of D^-1 A in [UPPER / SPREAD, UPPER] with UPPER a
 # safety margin above the estimated largest one; damped Jacobi (one fixed weight) stalls here
 # because the largest eigenvalue (~3.9 in 3D) leaves only a small weight for the rest.
@@ -45,6 +45,8 @@ class Multigrid:
             if int(last.active.sum()) <= COARSEST_DOFS or max(last.layout.box) <= 3:
                 break
             self.levels.append(make_coarse_level(last))
+        # coarse tiles around each fine tile's parent, for the transfers
+        self.parents = [device_array(up.layout.parents(lv.layout)) for up, lv in zip(self.levels, self.levels[1:])]
         # per level: y = A x, r the residual, and the rhs / solution it receives from the level above
         self.work = [tuple(lv.zeros() for _ in range(4)) for lv in self.levels]
         self.update()
@@ -54,13 +56,9 @@ class Multigrid:
         fine = self.levels[0]
         for k in range(1, len(self.levels)):
             lv, up = self.levels[k], self.levels[k - 1]
-            fixed_up = device_array((up.active & ~up.free).astype(float))
-            touched = lv.zeros()
-            kernels.restrict(lv.dim, lv.coords, lv.tmap, device_array(lv.active.astype(float)), up.tmap,
-                             up.layout.count, fixed_up, touched)
-            reach = lv.zeros()
-            kernels.restrict(lv.dim, lv.coords, lv.tmap, device_array(lv.active.astype(float)), up.tmap,
-                             up.layout.count, device_array(up.active.astype(float)), reach)
+            touched, reach = lv.zeros(), lv.zeros()
+            kernels.restrict_add(lv.dim, up.coords, self.parents[k - 1], lv.layout.count, device_array((up.active & ~up.free).astype(float)), touched)
+            kernels.restrict_add(lv.dim, up.coords, self.parents[k - 1], lv.layout.count, device_array(up.active.astype(float)), reach)
             share = touched.to_numpy() / np.maximum(reach.to_numpy(), 1e-300)
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
             if fine.shift != 0.0 or lv.shift != 0.0:
@@ -83,9 +81,11 @@ class Multigrid:
         lv.apply(x, y)
         kernels.residual(b, y, step)
         bc, xc = self.work[k + 1][2:]
-        kernels.restrict(lv.dim, down.coords, down.tmap, down.mask, lv.tmap, lv.layout.count, step, bc)
+        kernels.fill(bc, 0.0)
+        kernels.restrict_add(lv.dim, lv.coords, self.parents[k], down.layout.count, step, bc)
+        kernels.multiply(bc, down.mask)
         self._cycle(k + 1, bc, xc)
-        kernels.prolong_add(lv.dim, lv.coords, lv.tmap, lv.mask, down.tmap, down.layout.count, xc, x)
+        kernels.prolong_add(lv.dim, lv.coords, self.parents[k], lv.mask, xc, x)
         self._smooth(k, b, x, first=False)
 
     def _smooth(self, k: int, b, x, first: bool) -> None:
@@ -172,7 +172,7 @@ class CoarseSolver:
         active = level.active[comp, flat_pos]
         points = (np.tile(idx, (d, 1)) + 0.5 - 0.5 * np.eye(d, dtype=int)[comp]) * level.spacing
         cell = lay.dense(level.vc_host)
-        labels, _ = ndi.label(cell > 0, structure=np.ones((3,) * d))
+        labels, _ = ndi.label(cell > 0, structure=ndi.generate_binary_structure(d, 2))
         # a DOF belongs to the body of a material cell next to it (both cells along its axis)
         body = np.zeros(len(comp), dtype=np.int64)
         I = np.tile(idx, (d, 1))

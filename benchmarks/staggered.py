@@ -1,0 +1,151 @@
+"""Staggered method floors: a sphere shell solved statically, operator throughput, multigrid iterations.
+
+    .venv/bin/python -m benchmarks.staggered [--resolution 256] [--repeats 1] [--arch cpu] [--json out.json]
+    .venv/bin/python -m benchmarks.staggered --iterations 32 64 128 --nu 0.3 0.45 0.49
+
+Every job runs in its own spawned process (peak memory is that job's alone); medians over repeats.
+The shell: outer radius 1, inner 0.6, clamped below z = -0.8, gravity; rtol 1e-6.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import platform
+import resource
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+
+def shell_mesh(path: Path) -> None:
+    import trimesh
+
+    outer = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    inner = trimesh.creation.icosphere(subdivisions=5, radius=0.6)
+    inner.invert()
+    trimesh.util.concatenate([outer, inner]).export(path)
+
+
+def sphere_mesh(path: Path) -> None:
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=5, radius=1.0).export(path)
+
+
+def job(mesh: str, resolution: int, nu: float, rtol: float, arch: str) -> dict:
+    return {
+        "geometry": {"mesh": mesh},
+        "grid": {"resolution": resolution},
+        "material": {"youngs_modulus": 1e6, "poisson_ratio": nu, "density": 1000},
+        "loads": {"gravity": [0, 0, -9.81]},
+        "boundaries": [{"kind": "displacement", "name": "base", "region": {"box": [[-2, -2, -2], [2, 2, -0.8]]}, "value": [0, 0, 0]}],
+        "solver": {"rtol": rtol, "arch": arch, "max_iterations": 2000},
+        "output": {"fields": ["displacement"], "surface": False},
+    }
+
+
+def _solve(spec: dict, queue) -> None:
+    from engine.geometry.cache import GeometryCache
+    from engine.pipeline import Limits, run
+
+    t = time.perf_counter()
+    r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=64 * 2**30))
+    wall = time.perf_counter() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    level_dofs = None
+    queue.put({"wall_s": wall, "peak_bytes": peak, "iterations": r.solver.iterations, "residual": r.solver.residual,
+               "stages": r.solver.stage_times, "shape": list(r.grid.shape), "dofs": level_dofs})
+
+
+def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
+    """Median time of one operator apply and of a Taichi copy of the same vectors."""
+    import numpy as np
+
+    from engine.geometry.fractions import volume_fractions
+    from engine.geometry.loading import load_surface
+    from engine.grid import make_grid
+    from engine.runtime import init
+    from engine.staggered import kernels
+    from engine.staggered.operator import make_fine_level
+
+    init(arch, "f64")
+    surface = load_surface(Path(mesh).read_bytes(), filename=Path(mesh).name)
+    grid = make_grid(*surface.bounds, resolution=resolution)
+    level = make_fine_level(volume_fractions(surface, grid), 1.0, 1.0)
+    x, y = level.zeros(), level.zeros()
+    x.from_numpy(np.random.default_rng(0).standard_normal((grid.dim, level.size)) * level.active)
+
+    def timed(f, n=10):
+        f()
+        times = []
+        for _ in range(n):
+            t = time.perf_counter()
+            f()
+            kernels.dot(y, y)  # synchronise
+            times.append(time.perf_counter() - t)
+        return statistics.median(times)
+
+    apply_s = timed(lambda: level.apply(x, y))
+    copy_s = timed(lambda: kernels.copy(x, y))
+    positions = level.layout.count * level.layout.tile_size
+    queue.put({
+        "kept_positions": positions, "active_dofs": int(level.active.sum()),
+        "apply_s": apply_s, "copy_s": copy_s,
+        "copy_GBps": 2 * x.to_numpy().nbytes / copy_s,
+        "apply_positions_per_s": positions / apply_s, "apply_dofs_per_s": int(level.active.sum()) / apply_s,
+        "full_tiles": level.full_tiles, "tiles": level.layout.count,
+    })
+
+
+def in_process(target, *args) -> dict:
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=target, args=(*args, q))
+    p.start()
+    out = q.get()
+    p.join()
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--arch", default="cpu")
+    ap.add_argument("--iterations", type=int, nargs="*", help="resolutions of the multigrid iteration study (sphere)")
+    ap.add_argument("--nu", type=float, nargs="*", default=[0.3])
+    ap.add_argument("--json")
+    args = ap.parse_args()
+    out: dict = {"machine": platform.platform(), "cpus": mp.cpu_count()}
+    with tempfile.TemporaryDirectory() as tmp:
+        shell, sphere = Path(tmp) / "shell.stl", Path(tmp) / "sphere.stl"
+        shell_mesh(shell)
+        sphere_mesh(sphere)
+        if args.iterations:
+            rows = []
+            for nu in args.nu:
+                for n in args.iterations:
+                    r = in_process(_solve, job(str(sphere), n, nu, 1e-8, args.arch))
+                    rows.append({"nu": nu, "resolution": n, **r})
+                    print(f"sphere nu={nu} {n}^3: {r['iterations']} iterations to 1e-8, {r['wall_s']:.1f} s", flush=True)
+            out["iterations"] = rows
+        else:
+            tp = in_process(_throughput, str(shell), args.resolution, args.arch)
+            out["throughput"] = tp
+            print(f"operator: {tp['apply_s'] * 1e3:.1f} ms per apply, {tp['apply_dofs_per_s'] / 1e6:.1f} M DOF/s, "
+                  f"copy {tp['copy_GBps']:.1f} GB/s", flush=True)
+            runs = [in_process(_solve, job(str(shell), args.resolution, 0.3, 1e-6, args.arch)) for _ in range(args.repeats)]
+            out["shell"] = runs
+            wall = statistics.median(r["wall_s"] for r in runs)
+            peak = statistics.median(r["peak_bytes"] for r in runs)
+            print(f"shell {args.resolution}^3: {wall:.1f} s, {peak / 2**30:.2f} GiB, {runs[0]['iterations']} iterations, "
+                  f"stages {runs[0]['stages']}", flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
