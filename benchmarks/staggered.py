@@ -94,7 +94,7 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
     queue.put({
         "kept_positions": positions, "active_dofs": int(level.active.sum()),
         "apply_s": apply_s, "copy_s": copy_s,
-        "copy_GBps": 2 * x.to_numpy().nbytes / copy_s,
+        "copy_GBps": 2 * x.to_numpy().nbytes / copy_s / 1e9,
         "apply_positions_per_s": positions / apply_s, "apply_dofs_per_s": int(level.active.sum()) / apply_s,
         "full_tiles": level.full_tiles, "tiles": level.layout.count,
     })

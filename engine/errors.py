@@ -19,3 +19,7 @@ class ResultFormatError(VoxelasticError):
 
 class MethodUnavailableError(VoxelasticError):
     """The requested discretization is not implemented in this version."""
+
+
+class BoundaryError(VoxelasticError):
+    """A boundary condition or load that cannot be applied (names the boundary and why)."""

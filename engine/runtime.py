@@ -65,7 +65,9 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
         return _current
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
-    fp = ti.f64 if precision == "f64" else ti.f32
+    # Kernels compute in f64 whatever the precision: geometry must stay exact, and "f32" only
+    # selects the storage of the solver's arrays (half the memory traffic).
+    fp = ti.f64
     if arch == "auto":
         arch = "cuda" if cuda_driver_present() else "cpu"
     with contextlib.redirect_stdout(io.StringIO()):

@@ -29,7 +29,8 @@ def test_init_once_with_precision_and_refuses_a_switch():
         from engine import runtime
         info = runtime.init("auto", "f32")
         assert runtime.init("auto", "f32") is info
-        print(info.arch, info.precision, ti.lang.impl.get_runtime().default_fp == ti.f32)
+        # kernels always compute in f64 (exact geometry); f32 is the solver's storage
+        print(info.arch, info.precision, ti.lang.impl.get_runtime().default_fp == ti.f64)
         try:
             runtime.init("cpu", "f64")
         except RuntimeError as exc:

@@ -4,6 +4,7 @@ import functools
 import itertools
 
 import numpy as np
+import taichi as ti
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -287,7 +288,7 @@ def restrict(fine, coarse, f):
     """P^T f on the coarse level, the coarse zero tile included (where it lands is part of the check)."""
     out = coarse.zeros()
     kn.fill(out, 0.0)
-    kn.restrict_add(fine.dim, fine.coords, device_array(fine.layout.parents(coarse.layout)), coarse.layout.count, device_array(f), out)
+    kn.restrict_add(fine.dim, ti.f64, fine.coords, device_array(fine.layout.parents(coarse.layout)), coarse.layout.count, device_array(f), out)
     return out.to_numpy()
 
 

@@ -17,6 +17,10 @@ from typing import Any, Protocol
 from ..errors import VoxelasticError
 
 
+# The true residual may exceed the recursive one by round-off drift; beyond this factor it is a failure.
+TRUE_RESIDUAL_SLACK = 10.0
+
+
 class SolverError(VoxelasticError):
     """The linear solve did not converge; the message says why and what to change."""
 
@@ -118,4 +122,9 @@ def pcg(
     true_rel = math.sqrt(space.dot(r, r)) / bnorm
     if not space.finite(x) or not math.isfinite(true_rel):
         raise SolverError("solver: the solution is not finite")
+    if true_rel > TRUE_RESIDUAL_SLACK * rtol:
+        raise SolverError(
+            f"solver: the recursive residual reached solver.rtol = {rtol:g} but the true relative residual is "
+            f"{true_rel:.3g}; the tolerance is below what this precision resolves (use precision 'f64' or a larger rtol)"
+        )
     return SolveStats(it, true_rel, history)

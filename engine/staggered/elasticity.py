@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.ndimage as ndi
 
+from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..material import Material, stress, von_mises
@@ -128,7 +129,7 @@ class StaggeredElasticity:
             require_selection(int(chosen.sum()), "material", bc.name)
             vals = np.array([0.0 if v is None else float(v) for v in bc.value])[self.dof_comp[chosen]]
         if not np.all(np.isfinite(vals)):
-            raise ValueError(f"{bc.name}: prescribed displacement is not finite")
+            raise BoundaryError(f"{bc.name}: the prescribed displacement is not finite")
         a, p = self.dof_comp[chosen], self.dof_pos[chosen]
         fixed[a, p] = True
         self.values[a, p] = vals
@@ -154,7 +155,7 @@ class StaggeredElasticity:
             for a, (index, force) in enumerate(sampling.surface_loads(grid, pts, w, t, active, name=load.name)):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         if not np.all(np.isfinite(f)):
-            raise ValueError("loads: the load vector is not finite (check loads.gravity and traction values)")
+            raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
 
     def _divergence_load(self, load: SurfaceLoad) -> np.ndarray:
@@ -169,7 +170,7 @@ class StaggeredElasticity:
         elif callable(load.stress):
             stress_field = load.stress
         else:
-            raise ValueError(f"{load.name}: the divergence form needs a pressure or a stress field (a callable)")
+            raise BoundaryError(f"{load.name}: the divergence form needs a pressure or a stress field (a callable)")
         lay = level.layout
         box = lay.box
         grids = np.meshgrid(*[np.arange(n) for n in box], indexing="ij")

@@ -246,15 +246,15 @@ def prolong_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.
             for corner in range(2**d):
                 J, w = prolongation_weights(d, a, I + 2, corner)
                 v += w * coarse[a, parent_address(d, parents, coords, t, J)]
-            x[a, p] += mask[a, p] * v
+            x[a, p] = x[a, p] + mask[a, p] * v  # a plain store: no atomic, each p has one writer
 
 
 @ti.kernel
-def restrict_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(), zero: ti.i32,
-                 fine: ti.types.ndarray(), out: ti.types.ndarray()):
+def restrict_add(d: ti.template(), dtype: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
+                 zero: ti.i32, fine: ti.types.ndarray(), out: ti.types.ndarray()):
     """out += P^T fine, scattered from the fine DOFs with the prolongation's own weights (so the
     restriction is its exact transpose); nothing lands in the coarse zero tile (``zero``, the
-    coarse tile count). Callers zero ``out`` first and mask it after."""
+    coarse tile count). ``dtype``: the arrays' float type. Callers zero ``out`` first, mask after."""
     for t, l in ti.ndrange(coords.shape[0], B**d):
         I = index_of(d, coords, t, l)
         p = t * (B**d) + l
@@ -265,7 +265,7 @@ def restrict_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types
                     J, w = prolongation_weights(d, a, I + 2, corner)
                     q = parent_address(d, parents, coords, t, J)
                     if w != 0.0 and q < zero * (B**d):
-                        ti.atomic_add(out[a, q], w * r)
+                        ti.atomic_add(out[a, q], ti.cast(w * r, dtype))
 
 
 @ti.kernel
@@ -274,7 +274,7 @@ def jacobi_update(x: ti.types.ndarray(), dinv: ti.types.ndarray(), b: ti.types.n
     """x += omega D^-1 (b - y) where y = A x."""
     for p in range(x.shape[1]):
         for a in range(x.shape[0]):
-            x[a, p] += omega * dinv[a, p] * (b[a, p] - y[a, p])
+            x[a, p] = x[a, p] + omega * dinv[a, p] * (b[a, p] - y[a, p])
 
 
 @ti.kernel
@@ -285,7 +285,7 @@ def chebyshev_step(x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.typ
         for a in range(x.shape[0]):
             s = c1 * step[a, p] + c2 * dinv[a, p] * (b[a, p] - y[a, p])
             step[a, p] = s
-            x[a, p] += s
+            x[a, p] = x[a, p] + s
 
 
 @ti.kernel
@@ -318,7 +318,7 @@ def axpy(alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.ndarray()):
     """y += alpha x."""
     for p in range(x.shape[1]):
         for a in range(x.shape[0]):
-            y[a, p] += alpha * x[a, p]
+            y[a, p] = y[a, p] + alpha * x[a, p]
 
 
 @ti.kernel
@@ -348,7 +348,7 @@ def multiply(x: ti.types.ndarray(), m: ti.types.ndarray()):
     """x *= m (elementwise)."""
     for p in range(x.shape[1]):
         for a in range(x.shape[0]):
-            x[a, p] *= m[a, p]
+            x[a, p] = x[a, p] * m[a, p]
 
 
 @ti.kernel

@@ -18,7 +18,7 @@ import scipy.sparse.linalg as spla
 
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
-from .operator import Level, device_array, float_type, make_coarse_level, pairs
+from .operator import Level, device_array, float_type, make_coarse_level, pairs, taichi_float
 
 COARSEST_DOFS = 4000  # direct solve below this many unknowns
 DEGREE = 5  # Chebyshev smoothing steps before and after the coarse correction
@@ -57,9 +57,9 @@ class Multigrid:
         for k in range(1, len(self.levels)):
             lv, up = self.levels[k], self.levels[k - 1]
             touched, reach = lv.zeros(), lv.zeros()
-            kernels.restrict_add(lv.dim, up.coords, self.parents[k - 1], lv.layout.count, device_array((up.active & ~up.free).astype(float)), touched)
-            kernels.restrict_add(lv.dim, up.coords, self.parents[k - 1], lv.layout.count, device_array(up.active.astype(float)), reach)
-            share = touched.to_numpy() / np.maximum(reach.to_numpy(), 1e-300)
+            kernels.restrict_add(lv.dim, taichi_float(), up.coords, self.parents[k - 1], lv.layout.count, device_array((up.active & ~up.free).astype(float)), touched)
+            kernels.restrict_add(lv.dim, taichi_float(), up.coords, self.parents[k - 1], lv.layout.count, device_array(up.active.astype(float)), reach)
+            share = touched.to_numpy().astype(np.float64) / np.maximum(reach.to_numpy().astype(np.float64), 1e-300)
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
             if fine.shift != 0.0 or lv.shift != 0.0:
                 lv.set_shift(fine.shift, _density(fine))
@@ -82,7 +82,7 @@ class Multigrid:
         kernels.residual(b, y, step)
         bc, xc = self.work[k + 1][2:]
         kernels.fill(bc, 0.0)
-        kernels.restrict_add(lv.dim, lv.coords, self.parents[k], down.layout.count, step, bc)
+        kernels.restrict_add(lv.dim, taichi_float(), lv.coords, self.parents[k], down.layout.count, step, bc)
         kernels.multiply(bc, down.mask)
         self._cycle(k + 1, bc, xc)
         kernels.prolong_add(lv.dim, lv.coords, self.parents[k], lv.mask, xc, x)

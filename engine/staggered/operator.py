@@ -31,6 +31,11 @@ def float_type() -> type:
     return np.float64 if ensure_initialized().precision == "f64" else np.float32
 
 
+def taichi_float():
+    """The Taichi type of the solver's float arrays."""
+    return ti.f64 if float_type() is np.float64 else ti.f32
+
+
 def device_array(values: np.ndarray, dtype: type | None = None):
     """A Taichi ndarray holding ``values`` (float arrays in the solve precision)."""
     values = np.asarray(values)
@@ -79,7 +84,7 @@ class Level:
         return self.layout.size
 
     def zeros(self):
-        return ti.ndarray(dtype=ti.f64 if float_type() is np.float64 else ti.f32, shape=(self.dim, self.size))
+        return ti.ndarray(dtype=taichi_float(), shape=(self.dim, self.size))
 
     def set_free(self, free: np.ndarray) -> None:
         """free [d, size] bool: the unknowns (active and not prescribed)."""
