@@ -84,12 +84,12 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
         for _ in range(n):
             t = time.perf_counter()
             f()
-            kernels.dot(y, y)  # synchronise
+            kernels.dot(grid.dim, y, y)  # synchronise
             times.append(time.perf_counter() - t)
         return statistics.median(times)
 
     apply_s = timed(lambda: level.apply(x, y))
-    copy_s = timed(lambda: kernels.copy(x, y))
+    copy_s = timed(lambda: kernels.copy(grid.dim, x, y))
     positions = level.layout.count * level.layout.tile_size
     queue.put({
         "kept_positions": positions, "active_dofs": int(level.active.sum()),

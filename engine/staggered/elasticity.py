@@ -389,16 +389,16 @@ class _Space:
         return self.level.zeros()
 
     def dot(self, x, y) -> float:
-        return kernels.dot(x, y)
+        return kernels.dot(self.level.dim, x, y)
 
     def axpy(self, alpha: float, x, y) -> None:
-        kernels.axpy(alpha, x, y)
+        kernels.axpy(self.level.dim, alpha, x, y)
 
     def xpby(self, x, beta: float, y) -> None:
-        kernels.xpby(x, beta, y)
+        kernels.xpby(self.level.dim, x, beta, y)
 
     def copy(self, src, dst) -> None:
-        kernels.copy(src, dst)
+        kernels.copy(self.level.dim, src, dst)
 
     def finite(self, x) -> bool:
-        return kernels.count_nonfinite(x) == 0
+        return kernels.count_nonfinite(self.level.dim, x) == 0

@@ -269,93 +269,93 @@ def restrict_add(d: ti.template(), dtype: ti.template(), coords: ti.types.ndarra
 
 
 @ti.kernel
-def jacobi_update(x: ti.types.ndarray(), dinv: ti.types.ndarray(), b: ti.types.ndarray(),
+def jacobi_update(d: ti.template(), x: ti.types.ndarray(), dinv: ti.types.ndarray(), b: ti.types.ndarray(),
                   y: ti.types.ndarray(), omega: float):
     """x += omega D^-1 (b - y) where y = A x."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             x[a, p] = x[a, p] + omega * dinv[a, p] * (b[a, p] - y[a, p])
 
 
 @ti.kernel
-def chebyshev_step(x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.types.ndarray(),
+def chebyshev_step(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.types.ndarray(),
                    b: ti.types.ndarray(), y: ti.types.ndarray(), c1: float, c2: float):
     """step = c1 step + c2 D^-1 (b - y); x += step (one step of the Chebyshev recurrence)."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             s = c1 * step[a, p] + c2 * dinv[a, p] * (b[a, p] - y[a, p])
             step[a, p] = s
             x[a, p] = x[a, p] + s
 
 
 @ti.kernel
-def scaled(x: ti.types.ndarray(), s: ti.types.ndarray(), omega: float, out: ti.types.ndarray()):
+def scaled(d: ti.template(), x: ti.types.ndarray(), s: ti.types.ndarray(), omega: float, out: ti.types.ndarray()):
     """out = omega s x (elementwise)."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             out[a, p] = omega * s[a, p] * x[a, p]
 
 
 @ti.kernel
-def residual(b: ti.types.ndarray(), y: ti.types.ndarray(), r: ti.types.ndarray()):
+def residual(d: ti.template(), b: ti.types.ndarray(), y: ti.types.ndarray(), r: ti.types.ndarray()):
     """r = b - y."""
     for p in range(b.shape[1]):
-        for a in range(b.shape[0]):
+        for a in ti.static(range(d)):
             r[a, p] = b[a, p] - y[a, p]
 
 
 @ti.kernel
-def dot(x: ti.types.ndarray(), y: ti.types.ndarray()) -> ti.f64:
+def dot(d: ti.template(), x: ti.types.ndarray(), y: ti.types.ndarray()) -> ti.f64:
     s = ti.cast(0.0, ti.f64)
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             s += ti.cast(x[a, p], ti.f64) * ti.cast(y[a, p], ti.f64)
     return s
 
 
 @ti.kernel
-def axpy(alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.ndarray()):
+def axpy(d: ti.template(), alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.ndarray()):
     """y += alpha x."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             y[a, p] = y[a, p] + alpha * x[a, p]
 
 
 @ti.kernel
-def xpby(x: ti.types.ndarray(), beta: ti.f64, y: ti.types.ndarray()):
+def xpby(d: ti.template(), x: ti.types.ndarray(), beta: ti.f64, y: ti.types.ndarray()):
     """y = x + beta y."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             y[a, p] = x[a, p] + beta * y[a, p]
 
 
 @ti.kernel
-def copy(src: ti.types.ndarray(), dst: ti.types.ndarray()):
+def copy(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     for p in range(src.shape[1]):
-        for a in range(src.shape[0]):
+        for a in ti.static(range(d)):
             dst[a, p] = src[a, p]
 
 
 @ti.kernel
-def fill(x: ti.types.ndarray(), value: float):
+def fill(d: ti.template(), x: ti.types.ndarray(), value: float):
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             x[a, p] = value
 
 
 @ti.kernel
-def multiply(x: ti.types.ndarray(), m: ti.types.ndarray()):
+def multiply(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray()):
     """x *= m (elementwise)."""
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             x[a, p] = x[a, p] * m[a, p]
 
 
 @ti.kernel
-def count_nonfinite(x: ti.types.ndarray()) -> ti.i32:
+def count_nonfinite(d: ti.template(), x: ti.types.ndarray()) -> ti.i32:
     bad = 0
     for p in range(x.shape[1]):
-        for a in range(x.shape[0]):
+        for a in ti.static(range(d)):
             if ti.math.isnan(x[a, p]) or ti.math.isinf(x[a, p]):
                 bad += 1
     return bad

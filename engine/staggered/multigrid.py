@@ -20,7 +20,11 @@ from ..solvers.rigid import free_modes
 from . import assembly, kernels
 from .operator import Level, device_array, float_type, make_coarse_level, pairs, taichi_float
 
-COARSEST_DOFS = 4000  # direct solve below this many unknowns
+COARSEST_DOFS = 2000  # direct solve below this many unknowns
+# The coarsest grid keeps at least this many cells along its longest axis: coarser ones no longer
+# resolve thin walls, and their correction is poor (shell at 128^3: 41 iterations down to 8^3,
+# 23 down to 16^3, 18 down to 32^3 whose LU then costs 30 s).
+COARSEST_CELLS = 16
 DEGREE = 5  # Chebyshev smoothing steps before and after the coarse correction
 # The smoother targets the eigenvalues of D^-1 A in [UPPER / SPREAD, UPPER] with UPPER a
 # safety margin above the estimated largest one; damped Jacobi (one fixed weight) stalls here
@@ -42,7 +46,7 @@ class Multigrid:
         self.levels = [fine]
         while len(self.levels) < max_levels:
             last = self.levels[-1]
-            if int(last.active.sum()) <= COARSEST_DOFS or max(last.layout.box) <= 3:
+            if int(last.active.sum()) <= COARSEST_DOFS or (max(last.layout.box) - 1) // 2 < COARSEST_CELLS:
                 break
             self.levels.append(make_coarse_level(last))
         # coarse tiles around each fine tile's parent, for the transfers
@@ -79,11 +83,11 @@ class Multigrid:
         down = self.levels[k + 1]
         self._smooth(k, b, x, first=True)
         lv.apply(x, y)
-        kernels.residual(b, y, step)
+        kernels.residual(lv.dim, b, y, step)
         bc, xc = self.work[k + 1][2:]
-        kernels.fill(bc, 0.0)
+        kernels.fill(lv.dim, bc, 0.0)
         kernels.restrict_add(lv.dim, taichi_float(), lv.coords, self.parents[k], down.layout.count, step, bc)
-        kernels.multiply(bc, down.mask)
+        kernels.multiply(lv.dim, bc, down.mask)
         self._cycle(k + 1, bc, xc)
         kernels.prolong_add(lv.dim, lv.coords, self.parents[k], lv.mask, xc, x)
         self._smooth(k, b, x, first=False)
@@ -99,16 +103,16 @@ class Multigrid:
         sigma = theta / delta
         rho = 1.0 / sigma
         if first:
-            kernels.scaled(b, lv.dinv, 1.0 / theta, step)
-            kernels.copy(step, x)
+            kernels.scaled(lv.dim, b, lv.dinv, 1.0 / theta, step)
+            kernels.copy(lv.dim, step, x)
         else:
             lv.apply(x, y)
-            kernels.fill(step, 0.0)
-            kernels.chebyshev_step(x, step, lv.dinv, b, y, 0.0, 1.0 / theta)
+            kernels.fill(lv.dim, step, 0.0)
+            kernels.chebyshev_step(lv.dim, x, step, lv.dinv, b, y, 0.0, 1.0 / theta)
         for _ in range(DEGREE - 1):
             lv.apply(x, y)
             rho_next = 1.0 / (2.0 * sigma - rho)
-            kernels.chebyshev_step(x, step, lv.dinv, b, y, rho_next * rho, 2.0 * rho_next / delta)
+            kernels.chebyshev_step(lv.dim, x, step, lv.dinv, b, y, rho_next * rho, 2.0 * rho_next / delta)
             rho = rho_next
 
 
@@ -119,13 +123,13 @@ def _largest_eigenvalue(level: Level, work) -> float:
     v.from_numpy((rng.random((level.dim, level.size)) * level.free).astype(float_type()))
     estimate = 1.0
     for _ in range(POWER_STEPS):
-        norm = np.sqrt(kernels.dot(v, v))
+        norm = np.sqrt(kernels.dot(level.dim, v, v))
         if norm == 0.0:
             return 1.0
-        kernels.scaled(v, level.mask, 1.0 / norm, v)
+        kernels.scaled(level.dim, v, level.mask, 1.0 / norm, v)
         level.apply(v, y)
-        kernels.scaled(y, level.dinv, 1.0, v)
-        estimate = np.sqrt(kernels.dot(v, v))
+        kernels.scaled(level.dim, y, level.dinv, 1.0, v)
+        estimate = np.sqrt(kernels.dot(level.dim, v, v))
     return float(estimate)
 
 
