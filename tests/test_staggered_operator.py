@@ -397,13 +397,13 @@ def solve_and_compare(lev, fr, rng, levels):
 
 
 def test_multigrid_pcg_on_a_clamped_sphere(rng, monkeypatch):
-    monkeypatch.setattr(multigrid, "COARSEST_CELLS", 4)  # coarsen this small grid anyway
+    monkeypatch.setattr(multigrid, "MAX_CUT_SHARE", 1.0)  # coarsen this small grid anyway
     fr = sphere(18)  # 20^3 cells, ~10^4 free DOFs: two levels
     assert solve_and_compare(clamped(3, fr, -0.6), fr, rng, levels=2) <= 30  # 21 measured
 
 
 def test_multigrid_pcg_on_a_clamped_ellipse(rng, monkeypatch):
-    monkeypatch.setattr(multigrid, "COARSEST_CELLS", 4)
+    monkeypatch.setattr(multigrid, "MAX_CUT_SHARE", 1.0)
     fr = ellipse(180)  # ~3.3 10^4 free DOFs: three levels, so the cycle recurses
     assert solve_and_compare(clamped(2, fr, -0.5), fr, rng, levels=3) <= 30  # 17 measured
 
@@ -416,7 +416,7 @@ def test_free_body_in_the_complement_of_the_rigid_modes(rng, monkeypatch):
     force or torque) is solved by CG with the V-cycle's output projected onto their complement; that
     it converges (and the bordered reference system is regular) also says the rigid modes are the
     whole null space: the exact fractions of a sphere leave no mechanism."""
-    monkeypatch.setattr(multigrid, "COARSEST_CELLS", 4)  # a real hierarchy on this small grid
+    monkeypatch.setattr(multigrid, "MAX_CUT_SHARE", 1.0)  # a real hierarchy on this small grid
     d = 3
     rigid = d + d * (d - 1) // 2
     fr = sphere(14)

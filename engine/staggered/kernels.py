@@ -112,7 +112,9 @@ def stress_divergence(d: ti.template(), nbr: ti.types.ndarray(), mask: ti.types.
                 if ti.static(qa == a or qb == a):
                     b = ti.static(qb if qa == a else qa)
                     f += se[q, p] - se[q, near(d, nbr, t, c, unit(d, b))]
-            y[a, p] = mask[a, p] * (scale * f + shift * m[a, p] * x[a, p])
+            if shift != 0.0:  # uniform branch: statics never read the mass and x here
+                f += shift * m[a, p] * x[a, p] / scale
+            y[a, p] = mask[a, p] * scale * f
 
 
 @ti.kernel
