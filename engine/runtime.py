@@ -76,7 +76,8 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
             default_fp=fp,
             offline_cache=True,
             offline_cache_file_path=str(cache),
-            log_level=ti.WARN,
+            # f32 stores f64 results into f32 arrays on purpose; Taichi warns at every such store
+            log_level=ti.WARN if precision == "f64" else ti.ERROR,
         )
     chosen = ti.lang.impl.current_cfg().arch
     _current = RuntimeInfo(arch="cuda" if chosen == ti.cuda else "cpu", precision=precision, cache_dir=str(cache))

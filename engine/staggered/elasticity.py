@@ -22,7 +22,7 @@ from ..geometry.surface import Surface
 from ..material import Material, stress, von_mises
 from ..output import FieldData
 from ..regions import require_selection
-from ..solvers.cg import SolveStats, pcg
+from ..solvers.cg import SolveStats, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
@@ -250,18 +250,36 @@ class StaggeredElasticity:
             rhs = self._project(rhs)
         b = device_array(rhs)
         x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
-        precondition = self.multigrid.precondition
-        if self.modes:
-            def precondition(r, z):
-                self.multigrid.precondition(r, z)
-                z.from_numpy(self._project(z.to_numpy()).astype(float_type()))
-        stats = pcg(self.space, level.apply, precondition, b, x, rtol=self.rtol,
-                    max_iterations=self.max_iterations, on_iteration=on_iteration)
+        try:
+            stats = pcg(self.space, level.apply, self._preconditioner(self.multigrid.precondition), b, x,
+                        rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
+        except SolverError as exc:
+            if "iterations, short of" in str(exc):
+                raise  # the cap is the user's setting: Jacobi would only need more
+            # the V-cycle failed (lost definiteness, stagnated): plain Jacobi-PCG is slower but robust
+            self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")
+            x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
+            stats = pcg(self.space, level.apply, self._preconditioner(self._jacobi), b, x,
+                        rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
         u = x.to_numpy().astype(np.float64)
         if self.modes:
             u = self._project(u)
         u = u * level.free + value_scale * self.values * self.fixed
         return State(u, stats, time.perf_counter() - t0)
+
+    def _jacobi(self, r, z) -> None:
+        kernels.scaled(self.dim, r, self.level.dinv, 1.0, z)
+
+    def _preconditioner(self, inner: Callable):
+        """``inner`` followed by the projection off the free rigid modes, when there are any."""
+        if not self.modes:
+            return inner
+
+        def projected(r, z) -> None:
+            inner(r, z)
+            z.from_numpy(self._project(z.to_numpy()).astype(float_type()))
+
+        return projected
 
     def _project(self, v: np.ndarray) -> np.ndarray:
         flat = v.reshape(-1).copy()
