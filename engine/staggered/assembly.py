@@ -28,6 +28,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
+from ..solvers.rigid import rigid_modes  # noqa: F401  (re-exported: the reference's rigid motions)
+
 from ..errors import GridError
 from ..grid import Grid
 
@@ -204,27 +206,6 @@ def mass(face: dict[int, np.ndarray], spacing: float, density: float) -> np.ndar
     if len(shapes) != 1 or len(next(iter(shapes))) != d:
         raise ValueError(f"face fractions: all {d} arrays must share one {d}D index-box shape, got {sorted(shapes)}")
     return density * float(spacing) ** d * np.concatenate([np.asarray(face[a], dtype=float).ravel() for a in range(d)])
-
-
-def rigid_modes(positions: np.ndarray, components: np.ndarray, centre: np.ndarray | None = None) -> np.ndarray:
-    """Rigid motions [N, d + d(d-1)/2] sampled at DOFs: d translations, then rotations (a, b), a < b.
-
-    positions: [N, d] DOF sample positions [m]; components: [N] component a of each DOF.
-    DOF (a, I) takes component a of the mode at its position. The rotation (a, b) is the unit-angle
-    infinitesimal rotation in the (a, b) plane about ``centre`` c [m] (default: mean of
-    ``positions``, which keeps the columns well conditioned): u_a = -(x_b - c_b), u_b = x_a - c_a
-    (the convention of ``engine.solvers.rigid.rigid_modes``). Translation columns are dimensionless,
-    rotation columns in m per radian; columns are not normalised.
-    """
-    positions = np.asarray(positions, dtype=float)
-    components = np.asarray(components)
-    d = positions.shape[1]
-    c = positions.mean(axis=0) if centre is None else np.asarray(centre, dtype=float)
-    x = positions - c
-    modes = [(components == a).astype(float) for a in range(d)]
-    for a, b in _pairs(d):
-        modes.append(np.where(components == b, x[:, a], 0.0) - np.where(components == a, x[:, b], 0.0))
-    return np.stack(modes, axis=1)
 
 
 def _pairs(d: int) -> list[tuple[int, int]]:
