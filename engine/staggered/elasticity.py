@@ -67,6 +67,11 @@ class State:
 
 @dataclass
 class StaggeredElasticity:
+    """The method on one geometry: built once (level, prescribed DOFs, loads, rigid-mode checks,
+    multigrid), then solved as often as an analysis needs (``solve``; ``set_time_step`` for
+    backward Euler) and turned into fields (``fields``). Units SI; ``rtol``, ``max_iterations``
+    from solver settings; ``warnings`` collects what the user should know about the setup."""
+
     fractions: VolumeFractions
     surface: Surface
     material: Material
