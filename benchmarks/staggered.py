@@ -19,6 +19,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from .geometry import run_isolated
+
 
 def shell_mesh(path: Path) -> None:
     import trimesh
@@ -55,9 +57,8 @@ def _solve(spec: dict, queue) -> None:
     r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=64 * 2**30))
     wall = time.perf_counter() - t
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    level_dofs = None
     queue.put({"wall_s": wall, "peak_bytes": peak, "iterations": r.solver.iterations, "residual": r.solver.residual,
-               "stages": r.solver.stage_times, "shape": list(r.grid.shape), "dofs": level_dofs})
+               "stages": r.solver.stage_times, "shape": list(r.grid.shape)})
 
 
 def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
@@ -100,16 +101,6 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
     })
 
 
-def in_process(target, *args) -> dict:
-    ctx = mp.get_context("spawn")
-    q = ctx.Queue()
-    p = ctx.Process(target=target, args=(*args, q))
-    p.start()
-    out = q.get()
-    p.join()
-    return out
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=int, default=256)
@@ -128,16 +119,16 @@ def main() -> None:
             rows = []
             for nu in args.nu:
                 for n in args.iterations:
-                    r = in_process(_solve, job(str(sphere), n, nu, 1e-8, args.arch))
+                    r = run_isolated(_solve, job(str(sphere), n, nu, 1e-8, args.arch))
                     rows.append({"nu": nu, "resolution": n, **r})
                     print(f"sphere nu={nu} {n}^3: {r['iterations']} iterations to 1e-8, {r['wall_s']:.1f} s", flush=True)
             out["iterations"] = rows
         else:
-            tp = in_process(_throughput, str(shell), args.resolution, args.arch)
+            tp = run_isolated(_throughput, str(shell), args.resolution, args.arch)
             out["throughput"] = tp
             print(f"operator: {tp['apply_s'] * 1e3:.1f} ms per apply, {tp['apply_dofs_per_s'] / 1e6:.1f} M DOF/s, "
                   f"copy {tp['copy_GBps']:.1f} GB/s", flush=True)
-            runs = [in_process(_solve, job(str(shell), args.resolution, 0.3, 1e-6, args.arch)) for _ in range(args.repeats)]
+            runs = [run_isolated(_solve, job(str(shell), args.resolution, 0.3, 1e-6, args.arch)) for _ in range(args.repeats)]
             out["shell"] = runs
             wall = statistics.median(r["wall_s"] for r in runs)
             peak = statistics.median(r["peak_bytes"] for r in runs)
