@@ -167,11 +167,13 @@ def make_coarse_level(fine: Level) -> Level:
 
 def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float) -> Level:
     """Drop the tiles holding no active DOF and no material, then build the level."""
-    probe = Level(layout, spacing, vc, ve, vf, lam, mu)
-    ts = layout.tile_size
-    keep = probe.active.reshape(layout.dim, -1, ts)[:, : layout.count].any(axis=(0, 2))
+    d, ts = layout.dim, layout.tile_size
+    active = device_array(np.zeros((d, layout.size), dtype=np.int32))
+    kernels.active_faces(d, device_array(layout.coords.astype(np.int32)), device_array(layout.tile_map.astype(np.int32)),
+                         device_array(vc), active)
+    keep = active.to_numpy().reshape(d, -1, ts)[:, : layout.count].any(axis=(0, 2))
     keep |= (vc.reshape(-1, ts)[: layout.count] > 0).any(axis=1)
-    if keep.all():
-        return probe
-    pruned, order = layout.select(keep)
-    return Level(pruned, spacing, reorder(vc, order, ts), reorder(ve, order, ts), reorder(vf, order, ts), lam, mu)
+    if not keep.all():
+        layout, order = layout.select(keep)
+        vc, ve, vf = reorder(vc, order, ts), reorder(ve, order, ts), reorder(vf, order, ts)
+    return Level(layout, spacing, vc, ve, vf, lam, mu)
