@@ -22,7 +22,12 @@ TRUE_RESIDUAL_SLACK = 10.0
 
 
 class SolverError(VoxelasticError):
-    """The linear solve did not converge; the message says why and what to change."""
+    """The linear solve did not converge; the message says why and what to change. ``reason``:
+    "loads", "cap", "indefinite", "nonfinite", "stagnation" or "precision"."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class Space(Protocol):
@@ -63,7 +68,7 @@ def pcg(
     """
     bnorm = math.sqrt(space.dot(b, b))
     if not math.isfinite(bnorm):
-        raise SolverError("solver: the load vector is not finite (check loads and prescribed values)")
+        raise SolverError("solver: the load vector is not finite (check loads and prescribed values)", "loads")
     if bnorm == 0.0:
         space.copy(space.zeros(), x)
         return SolveStats(0, 0.0)
@@ -82,14 +87,14 @@ def pcg(
         if it >= max_iterations:
             raise SolverError(
                 f"solver: relative residual {rel:.3g} after solver.max_iterations = {max_iterations} iterations, "
-                f"short of solver.rtol = {rtol:g}; raise max_iterations or loosen rtol"
+                f"short of solver.rtol = {rtol:g}; raise max_iterations or loosen rtol", "cap"
             )
         apply(p, q)
         pq = space.dot(p, q)
         if not (pq > 0.0) or not math.isfinite(pq):
             raise SolverError(
                 f"solver: the operator lost positive definiteness at iteration {it} (p.Ap = {pq:.3g}); "
-                "the problem is singular or too ill-conditioned for this precision"
+                "the problem is singular or too ill-conditioned for this precision", "indefinite"
             )
         alpha = rz / pq
         space.axpy(alpha, p, x)
@@ -100,13 +105,13 @@ def pcg(
         if on_iteration is not None:
             on_iteration(it, rel)
         if not math.isfinite(rel):
-            raise SolverError(f"solver: the residual became non-finite at iteration {it}")
+            raise SolverError(f"solver: the residual became non-finite at iteration {it}", "nonfinite")
         if rel < best * 0.999:
             best, best_at = rel, it
         elif it - best_at >= stagnation:
             raise SolverError(
                 f"solver: stagnated at relative residual {best:.3g} (no progress in {stagnation} iterations), "
-                f"short of solver.rtol = {rtol:g}; the tolerance may be below what this precision resolves"
+                f"short of solver.rtol = {rtol:g}; the tolerance may be below what this precision resolves", "stagnation"
             )
         if rel <= rtol:
             break
@@ -121,10 +126,10 @@ def pcg(
     space.axpy(-1.0, q, r)
     true_rel = math.sqrt(space.dot(r, r)) / bnorm
     if not space.finite(x) or not math.isfinite(true_rel):
-        raise SolverError("solver: the solution is not finite")
+        raise SolverError("solver: the solution is not finite", "nonfinite")
     if true_rel > TRUE_RESIDUAL_SLACK * rtol:
         raise SolverError(
             f"solver: the recursive residual reached solver.rtol = {rtol:g} but the true relative residual is "
-            f"{true_rel:.3g}; the tolerance is below what this precision resolves (use precision 'f64' or a larger rtol)"
+            f"{true_rel:.3g}; the tolerance is below what this precision resolves (use precision 'f64' or a larger rtol)", "precision"
         )
     return SolveStats(it, true_rel, history)

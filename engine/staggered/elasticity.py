@@ -14,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.ndimage as ndi
 
 from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
@@ -26,7 +25,7 @@ from ..solvers.cg import SolveStats, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
-from .operator import MIN_FRACTION, Level, device_array, float_type, make_fine_level, pairs
+from .operator import MIN_FRACTION, Level, device_array, dof_bodies, float_type, make_fine_level, pairs
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -212,18 +211,7 @@ class StaggeredElasticity:
     def _floating_modes(self) -> list:
         """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
         positions a * size + p of those DOFs)."""
-        cell = self.level.layout.dense(self.level.vc_host)
-        labels, count = ndi.label(cell > 0, structure=ndi.generate_binary_structure(self.dim, 2))
-        if count == 0:
-            return []
-        index = self.index[self.dof_pos]
-        shift = np.eye(self.dim, dtype=np.int64)[self.dof_comp]
-        body = np.zeros(len(index), dtype=np.int64)
-        for J in (index, index - shift):
-            ok = np.all((J >= 0) & (J < np.asarray(cell.shape)), axis=1)
-            lab = np.zeros(len(J), dtype=np.int64)
-            lab[ok] = labels[tuple(J[ok].T)]
-            body = np.where(body == 0, lab, body)
+        body = dof_bodies(self.level, self.index[self.dof_pos], self.dof_comp)
         fixed = self.fixed[self.dof_comp, self.dof_pos]
         out = []
         for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body):
@@ -259,7 +247,7 @@ class StaggeredElasticity:
             stats = pcg(self.space, level.apply, self._preconditioner(self.multigrid.precondition), b, x,
                         rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
         except SolverError as exc:
-            if "iterations, short of" in str(exc):
+            if exc.reason == "cap":
                 raise  # the cap is the user's setting: Jacobi would only need more
             # the V-cycle failed (lost definiteness, stagnated): plain Jacobi-PCG is slower but robust
             self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")

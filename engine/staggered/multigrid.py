@@ -12,13 +12,12 @@ is solved directly (sparse LU) with the rigid modes of floating bodies bordered 
 from __future__ import annotations
 
 import numpy as np
-import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
-from .operator import Level, device_array, float_type, make_coarse_level, pairs, taichi_float
+from .operator import Level, device_array, dof_bodies, float_type, make_coarse_level, pairs, taichi_float
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -71,7 +70,7 @@ class Multigrid:
             share = touched.to_numpy().astype(np.float64) / np.maximum(reach.to_numpy().astype(np.float64), 1e-300)
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
             if fine.shift != 0.0 or lv.shift != 0.0:
-                lv.set_shift(fine.shift, _density(fine))
+                lv.set_shift(fine.shift, fine.density)
         self.coarse = CoarseSolver(self.levels[-1])
         self.bounds = [_largest_eigenvalue(lv, self.work[k]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
 
@@ -145,10 +144,6 @@ def _largest_eigenvalue(level: Level, work) -> float:
     return float(estimate)
 
 
-def _density(level: Level) -> float:
-    return level.density
-
-
 class CoarseSolver:
     """Sparse LU of the coarsest operator on its free DOFs. Bodies whose rigid modes the coarse
     Dirichlet DOFs leave free (and no mass term) are bordered with those modes, which makes the
@@ -187,17 +182,7 @@ class CoarseSolver:
         d = lay.dim
         active = level.active[comp, flat_pos]
         points = (np.tile(idx, (d, 1)) + 0.5 - 0.5 * np.eye(d, dtype=int)[comp]) * level.spacing
-        cell = lay.dense(level.vc_host)
-        labels, _ = ndi.label(cell > 0, structure=ndi.generate_binary_structure(d, 2))
-        # a DOF belongs to the body of a material cell next to it (both cells along its axis)
-        body = np.zeros(len(comp), dtype=np.int64)
-        I = np.tile(idx, (d, 1))
-        for shift in (0, 1):
-            J = I - shift * np.eye(d, dtype=np.int64)[comp]
-            ok = np.all((J >= 0) & (J < np.asarray(cell.shape)), axis=1)
-            lab = np.zeros(len(J), dtype=np.int64)
-            lab[ok] = labels[tuple(J[ok].T)]
-            body = np.where(body == 0, lab, body)
+        body = dof_bodies(level, np.tile(idx, (d, 1)), comp)
         on = active & (body > 0)
         modes = free_modes(points[on], comp[on], ~free[on], body[on])
         free_index = -np.ones(len(comp), dtype=np.int64)

@@ -10,6 +10,7 @@ runs never build a mass). The finest level comes from exact volume fractions
 from __future__ import annotations
 
 import numpy as np
+import scipy.ndimage as ndi
 import taichi as ti
 
 from ..geometry.fractions import VolumeFractions
@@ -124,6 +125,22 @@ class Level:
             self.apply(x, y)
         finally:
             self.mask = saved
+
+
+def dof_bodies(level: Level, index: np.ndarray, comp: np.ndarray) -> np.ndarray:
+    """Body label [n] (1, 2, ...; 0 if none) of face DOFs (comp [n], global index [n, d]): the
+    connected component of material cells (edge connectivity: cells sharing only a vertex share
+    no term) of a cell on either side of the face."""
+    d = level.dim
+    cell = level.layout.dense(level.vc_host)
+    labels, _ = ndi.label(cell > 0, structure=ndi.generate_binary_structure(d, 2))
+    body = np.zeros(len(index), dtype=np.int64)
+    for J in (index, index - np.eye(d, dtype=np.int64)[comp]):
+        ok = np.all((J >= 0) & (J < np.asarray(cell.shape)), axis=1)
+        lab = np.zeros(len(J), dtype=np.int64)
+        lab[ok] = labels[tuple(J[ok].T)]
+        body = np.where(body == 0, lab, body)
+    return body
 
 
 def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
