@@ -19,7 +19,7 @@ from engine.staggered import kernels as kn
 from engine.staggered.layout import TILE
 from engine.staggered.multigrid import Multigrid
 from engine.staggered import multigrid
-from engine.staggered.operator import MIN_FRACTION, device_array, make_coarse_level, make_fine_level, pairs
+from engine.staggered.operator import device_array, make_coarse_level, make_fine_level, pairs, weights
 from tests.conftest import polygon_surface_2d, surface_of
 
 LAM, MU = 1.3, 0.7
@@ -79,10 +79,9 @@ class Reference:
 
     @classmethod
     def of_fractions(cls, lev, fractions):
-        """The exact fractions with the level's sliver floor (weights in (0, MIN_FRACTION) raised)."""
+        """The exact fractions as the level weighs them (round-off snapped to 1, slivers raised)."""
         cell, _, edges = assembly.box_fractions(fractions)
-        floor = lambda v: np.where((v > 0) & (v < MIN_FRACTION), MIN_FRACTION, v)  # noqa: E731
-        return cls(lev, floor(cell), {p: floor(v) for p, v in edges.items()})
+        return cls(lev, weights(cell), {p: weights(v) for p, v in edges.items()})
 
     @classmethod
     def of_level(cls, lev):

@@ -49,12 +49,14 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
     shape [n_body_free, 1 + k] would be awkward, hence pairs.
     """
     out = []
+    d = points.shape[1]
     for label in np.unique(body):
         on = body == label
-        modes = rigid_modes(points[on], axis[on])
-        norms = np.linalg.norm(modes, axis=0)
-        modes = modes / np.where(norms > 0, norms, 1.0)
-        pinned = modes[fixed[on]]
+        center = points[on].mean(axis=0)
+        # unit columns over the whole body, but only the pinned rows built: a clamped body (the
+        # usual case) stops here, without an [n, modes] array over all its DOFs
+        norms = _mode_norms(points[on] - center, axis[on], d)
+        pinned = rigid_modes(points[on & fixed], axis[on & fixed], center) / norms
         gram = pinned.T @ pinned
         w, v = np.linalg.eigh(gram)
         loose = v[:, w < PIN_TOLERANCE * max(1.0, float(w.max(initial=0.0)))]
@@ -63,11 +65,22 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
         free_dofs = np.nonzero(on & ~fixed)[0]
         # the modes can be dependent on few DOFs (a rotation vanishes at a lone cell's faces): keep
         # only the directions they really span
-        u, sv, _ = np.linalg.svd(modes[~fixed[on]] @ loose, full_matrices=False)
+        free_part = rigid_modes(points[free_dofs], axis[free_dofs], center) / norms
+        u, sv, _ = np.linalg.svd(free_part @ loose, full_matrices=False)
         q = u[:, sv > RANK_TOLERANCE * max(1.0, float(sv.max(initial=0.0)))]
         if q.shape[1]:
             out.append((free_dofs, q))
     return out
+
+
+def _mode_norms(x: np.ndarray, axis: np.ndarray, d: int) -> np.ndarray:
+    """Euclidean norms [m] of the columns of ``rigid_modes`` about the centroid (x: points minus
+    the centroid), without building them; 1 for a column that vanishes."""
+    squares = [float(np.count_nonzero(axis == k)) for k in range(d)]
+    for k, l in itertools.combinations(range(d), 2):
+        squares.append(float(np.sum(x[axis == k, l] ** 2) + np.sum(x[axis == l, k] ** 2)))
+    norms = np.sqrt(np.asarray(squares))
+    return np.where(norms > 0, norms, 1.0)
 
 
 def check_balance(points: np.ndarray, axis: np.ndarray, loads: np.ndarray, modes: list) -> None:

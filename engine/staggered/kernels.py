@@ -71,11 +71,13 @@ def near(d: ti.template(), nbr: ti.types.ndarray(), t: ti.i32, c, o) -> ti.i32:
 
 
 @ti.kernel
-def weighted_stresses(d: ti.template(), nbr: ti.types.ndarray(), full: ti.types.ndarray(),
+def weighted_stresses(d: ti.template(), tiles: ti.types.ndarray(), nbr: ti.types.ndarray(), full: ti.types.ndarray(),
                       u: ti.types.ndarray(), vc: ti.types.ndarray(), ve: ti.types.ndarray(),
                       lam: float, mu: float, inv_h: float, sc: ti.types.ndarray(), se: ti.types.ndarray()):
-    """sc[a] = Vc (2 mu eps_aa + lam tr eps) at cells; se[q] = Ve 2 mu eps_ab at edges of pair q."""
-    for t, l in ti.ndrange(nbr.shape[0], B**d):
+    """sc[a] = Vc (2 mu eps_aa + lam tr eps) at cells; se[q] = Ve 2 mu eps_ab at edges of pair q,
+    in the tiles ``tiles`` [m]."""
+    for i, l in ti.ndrange(tiles.shape[0], B**d):
+        t = tiles[i]
         c = local_coords(d, l)
         p = t * (B**d) + l
         eps = ti.Vector([0.0] * d)
@@ -98,11 +100,13 @@ def weighted_stresses(d: ti.template(), nbr: ti.types.ndarray(), full: ti.types.
 
 
 @ti.kernel
-def stress_divergence(d: ti.template(), nbr: ti.types.ndarray(), mask: ti.types.ndarray(),
+def stress_divergence(d: ti.template(), tiles: ti.types.ndarray(), nbr: ti.types.ndarray(), mask: ti.types.ndarray(),
                       sc: ti.types.ndarray(), se: ti.types.ndarray(), scale: float, x: ti.types.ndarray(),
                       m: ti.types.ndarray(), shift: float, y: ti.types.ndarray()):
-    """y = mask (h^{d-1} div(weighted stresses) + shift m x): the operator K (+ shift M) at the faces."""
-    for t, l in ti.ndrange(nbr.shape[0], B**d):
+    """y = mask (h^{d-1} div(weighted stresses) + shift m x): the operator K (+ shift M) at the
+    faces of the tiles ``tiles`` (whose stresses and their neighbours' must be current)."""
+    for i, l in ti.ndrange(tiles.shape[0], B**d):
+        t = tiles[i]
         c = local_coords(d, l)
         p = t * (B**d) + l
         for a in ti.static(range(d)):
@@ -168,6 +172,27 @@ def prune_edges(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.nda
                  + active[b, p] + active[b, address(d, tmap, I - unit(d, a), nt)])
             if n < 4:
                 ve[q, p] = 0.0
+
+
+@ti.kernel
+def boundary_band(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(), vc: ti.types.ndarray(),
+                  fixed: ti.types.ndarray(), band: ti.types.ndarray()):
+    """band[p] = 1 where a cut cell (0 < vc < 1) or a prescribed DOF (``fixed`` [size]) lies in the
+    3^d block around position p."""
+    nt = coords.shape[0]
+    for t, l in ti.ndrange(nt, B**d):
+        I = index_of(d, coords, t, l)
+        hit = 0
+        for s in range(3**d):
+            o = ti.Vector([0] * d, dt=ti.i32)
+            code = s
+            for k in ti.static(range(d)):
+                o[d - 1 - k] = code % 3 - 1
+                code //= 3
+            q = address(d, tmap, I + o, nt)
+            if (vc[q] > 0 and vc[q] < 1) or fixed[q] != 0:
+                hit = 1
+        band[t * (B**d) + l] = hit
 
 
 @ti.kernel
@@ -280,10 +305,12 @@ def jacobi_update(d: ti.template(), x: ti.types.ndarray(), dinv: ti.types.ndarra
 
 
 @ti.kernel
-def chebyshev_step(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.types.ndarray(),
-                   b: ti.types.ndarray(), y: ti.types.ndarray(), c1: float, c2: float):
-    """step = c1 step + c2 D^-1 (b - y); x += step (one step of the Chebyshev recurrence)."""
-    for p in range(x.shape[1]):
+def chebyshev_step(d: ti.template(), tiles: ti.types.ndarray(), x: ti.types.ndarray(), step: ti.types.ndarray(),
+                   dinv: ti.types.ndarray(), b: ti.types.ndarray(), y: ti.types.ndarray(), c1: float, c2: float):
+    """step = c1 step + c2 D^-1 (b - y); x += step (one step of the Chebyshev recurrence) in the
+    tiles ``tiles``."""
+    for i, l in ti.ndrange(tiles.shape[0], B**d):
+        p = tiles[i] * (B**d) + l
         for a in ti.static(range(d)):
             s = c1 * step[a, p] + c2 * dinv[a, p] * (b[a, p] - y[a, p])
             step[a, p] = s

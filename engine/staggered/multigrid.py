@@ -4,8 +4,10 @@ Coarse levels are rediscretised from averaged cell fractions (Zhu et al. 2010): 
 2h control volume is weighted by the solid fraction of the 2^d fine cells it is made of, so free
 surfaces stay implicit on every level. Transfers are the multilinear interpolation of each
 component on its own faces (which keeps rigid motions) and its transpose. A coarse DOF is
-prescribed when most of the fine DOFs it interpolates to are. Smoothing is a Chebyshev
-polynomial in D^-1 A (symmetric, so the cycle is a valid CG preconditioner); the coarsest level
+prescribed when a quarter of the fine DOFs it interpolates to are. Smoothing is a Chebyshev polynomial in
+D^-1 A (symmetric, so the cycle is a valid CG preconditioner), with extra steps on a band around
+cut cells and prescribed DOFs, where the rediscretised coarse operator departs most from the
+fine one (the boundary smoothing of Zhu et al. 2010 and McAdams et al. 2010); the coarsest level
 is solved directly (sparse LU) with the rigid modes of floating bodies bordered out.
 """
 
@@ -26,17 +28,27 @@ COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # Shell at 128^3: 41 iterations when coarsening to a 9 box, 23 stopping at 21, 18 stopping at 37
 # (whose sparse LU then took 30 s).
 MAX_CUT_SHARE = 0.85
-DEGREE = 5  # Chebyshev smoothing steps before and after the coarse correction
+DEGREE = 3  # Chebyshev smoothing steps before and after the coarse correction
 # The smoother targets the eigenvalues of D^-1 A in [UPPER / SPREAD, UPPER] with UPPER a
 # safety margin above the estimated largest one; damped Jacobi (one fixed weight) stalls here
 # because the largest eigenvalue (~3.9 in 3D) leaves only a small weight for the rest.
 SPREAD = 6.0
 MARGIN = 1.1
 POWER_STEPS = 12
-# A coarse DOF is prescribed when more than this share of the fine DOFs it interpolates to are:
-# with any share the coarse space cannot follow the error just beside a clamped patch (measured
-# two-grid factor 0.67 -> 0.21 at 0.5); with all of them the coarse problem floats over the patch.
-FIXED_SHARE = 0.5
+# Boundary smoothing: BAND_DEGREE more Chebyshev steps on [UPPER / BAND_SPREAD, UPPER], only on
+# the free DOFs within one cell of a cut cell or a prescribed DOF. Near the surface the averaged
+# coarse fractions misjudge the energy of interpolated errors (the stationary V-cycle diverges
+# there: error growth 2.7 per cycle on the 64^3 sphere); the band costs a fraction of a sweep.
+# Shell 256^3 to 1e-6: 61 CG iterations without the band, 28 with it (details in docs/benchmarks.md).
+BAND_DEGREE = 5
+BAND_SPREAD = 30.0
+# A coarse DOF is prescribed when more than this share (by interpolation weight) of the fine DOFs
+# it interpolates to are. A free coarse DOF interpolating onto prescribed fine ones makes a jump
+# (they are masked) whose energy the coarse operator does not see: error growth per stationary
+# V-cycle on the 64^3 sphere clamped below z = -0.8 was 40 with a majority (1900 with 3/4),
+# 2.7 with "any"; but "any" grows the clamp by a coarse cell per level, and then CG iterations
+# rose (sphere 128^3: 31 with "any", 16 with 1/4, 16 with 1/2, all with the band smoothing).
+FIXED_SHARE = 0.25
 
 
 class Multigrid:
@@ -73,6 +85,7 @@ class Multigrid:
                 lv.set_shift(fine.shift, fine.density)
         self.coarse = CoarseSolver(self.levels[-1])
         self.bounds = [_largest_eigenvalue(lv, self.work[k]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
+        self.bands = [boundary_band(lv) for lv in self.levels[:-1]]
 
     def precondition(self, r, z) -> None:
         """z = V-cycle(r) with a zero initial guess."""
@@ -97,27 +110,55 @@ class Multigrid:
         self._smooth(k, b, x, first=False)
 
     def _smooth(self, k: int, b, x, first: bool) -> None:
-        """DEGREE steps of Chebyshev iteration on D^-1 A (a fixed polynomial, so the cycle stays
-        symmetric); ``first``: x is zero on entry."""
+        """Pre-smoothing (``first``: x is zero on entry) is the interior steps then the band's;
+        post-smoothing the same in reverse order, so the cycle stays symmetric."""
+        lv = self.levels[k]
+        band = self.bands[k]
+        if first:
+            self._chebyshev(k, b, x, lv.dinv, lv.everywhere, SPREAD, DEGREE, first=True)
+        if band is not None:
+            self._chebyshev(k, b, x, band[0], band[1], BAND_SPREAD, BAND_DEGREE, first=False)
+        if not first:
+            self._chebyshev(k, b, x, lv.dinv, lv.everywhere, SPREAD, DEGREE, first=False)
+
+    def _chebyshev(self, k: int, b, x, dinv, part, spread: float, degree: int, first: bool) -> None:
+        """``degree`` steps of Chebyshev iteration on D^-1 A with eigenvalues taken in
+        [upper / spread, upper] (a fixed polynomial); updates only where ``dinv`` is non-zero,
+        computing A x only in ``part``'s tiles. ``first``: x is zero on entry."""
         lv = self.levels[k]
         y, step = self.work[k][:2]
         upper = self.bounds[k]
-        lower = upper / SPREAD
+        lower = upper / spread
         theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
         sigma = theta / delta
         rho = 1.0 / sigma
         if first:
-            kernels.scaled(lv.dim, b, lv.dinv, 1.0 / theta, step)
+            kernels.scaled(lv.dim, b, dinv, 1.0 / theta, step)
             kernels.copy(lv.dim, step, x)
         else:
-            lv.apply(x, y)
+            lv.apply(x, y, part)
             kernels.fill(lv.dim, step, 0.0)
-            kernels.chebyshev_step(lv.dim, x, step, lv.dinv, b, y, 0.0, 1.0 / theta)
-        for _ in range(DEGREE - 1):
-            lv.apply(x, y)
+            kernels.chebyshev_step(lv.dim, part.tiles, x, step, dinv, b, y, 0.0, 1.0 / theta)
+        for _ in range(degree - 1):
+            lv.apply(x, y, part)
             rho_next = 1.0 / (2.0 * sigma - rho)
-            kernels.chebyshev_step(lv.dim, x, step, lv.dinv, b, y, rho_next * rho, 2.0 * rho_next / delta)
+            kernels.chebyshev_step(lv.dim, part.tiles, x, step, dinv, b, y, rho_next * rho, 2.0 * rho_next / delta)
             rho = rho_next
+
+
+def boundary_band(level: Level):
+    """(D^-1 restricted to the band, its ``Part``) for the boundary smoothing of ``level``, or None
+    when no free DOF is within one cell of a cut cell or a prescribed DOF."""
+    fixed = device_array((level.active & ~level.free).any(axis=0).astype(np.int32))
+    near = device_array(np.zeros(level.size, dtype=np.int32))
+    kernels.boundary_band(level.dim, level.coords, level.tmap, level.vc, fixed, near)
+    members = level.free & (near.to_numpy() > 0)[None]
+    if not members.any():
+        return None
+    tiles = np.nonzero(members.reshape(level.dim, -1, level.layout.tile_size).any(axis=(0, 2)))[0]
+    dinv = level.zeros()
+    kernels.scaled(level.dim, level.dinv, device_array(members.astype(float)), 1.0, dinv)
+    return dinv, level.part(tiles)
 
 
 def cut_share(level: Level) -> float:

@@ -9,6 +9,8 @@ runs never build a mass). The finest level comes from exact volume fractions
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.ndimage as ndi
 import taichi as ti
@@ -19,6 +21,10 @@ from .layout import TileLayout, dilate, make_layout, reorder
 
 
 MIN_FRACTION = 1e-3
+# The scan conversion sums prisms, so interior control volumes come out up to ~1e-14 below 1
+# (8% of the shell's cells at 128^3). Read as cut, they would keep their tiles off the full-tile
+# path and put them in the multigrid's boundary band; within this of 1 a fraction is 1.
+ROUNDOFF = 1e-12
 
 
 def pairs(d: int) -> tuple[tuple[int, int], ...]:
@@ -48,6 +54,16 @@ def device_array(values: np.ndarray, dtype: type | None = None):
     return out
 
 
+@dataclass(frozen=True)
+class Part:
+    """Tiles of a level an apply works on: ``tiles`` [m] int32 get y = A x, ``stress`` [k] int32
+    (``tiles`` and their neighbours) get the weighted stresses that it reads."""
+
+    tiles: object
+    stress: object
+    count: int
+
+
 class Level:
     """The operator on one level. Fractions: vc [size] cells, ve [pairs, size] edges, vf [d, size]
     faces (control-volume fractions in [0, 1]); spacing h [m]; lam, mu [Pa]."""
@@ -62,6 +78,8 @@ class Level:
         self.coords = device_array(layout.coords.astype(np.int32))
         self.tmap = device_array(layout.tile_map.astype(np.int32))
         self.nbr = device_array(layout.neighbours())
+        every = device_array(np.arange(layout.count, dtype=np.int32))
+        self.everywhere = Part(every, every, layout.count)
         self.vc, self.ve = device_array(vc), device_array(ve)
         active = device_array(np.zeros((d, size), dtype=np.int32))
         kernels.active_faces(d, self.coords, self.tmap, self.vc, active)
@@ -109,12 +127,20 @@ class Level:
         kernels.inverse_diagonal(d, self.coords, self.tmap, self.mask, self.vc, self.ve, self.lam, self.mu,
                                  self.spacing ** (d - 2), self._mass_or_mask(), self.shift, self.dinv)
 
-    def apply(self, x, y) -> None:
-        """y = A x on the free DOFs (x must vanish off them)."""
+    def part(self, tiles: np.ndarray) -> Part:
+        """The ``Part`` of the kept tiles ``tiles`` [m] (tile numbers)."""
+        tiles = np.unique(np.asarray(tiles, dtype=np.int32))
+        halo = np.unique(self.layout.neighbours()[tiles])
+        halo = halo[halo < self.layout.count]
+        return Part(device_array(tiles), device_array(halo.astype(np.int32)), len(tiles))
+
+    def apply(self, x, y, part: Part | None = None) -> None:
+        """y = A x on the free DOFs (x must vanish off them); only in ``part``'s tiles when given."""
         d = self.dim
-        kernels.weighted_stresses(d, self.nbr, self.full, x, self.vc, self.ve,
+        part = part or self.everywhere
+        kernels.weighted_stresses(d, part.stress, self.nbr, self.full, x, self.vc, self.ve,
                                   self.lam, self.mu, 1.0 / self.spacing, self.sc, self.se)
-        kernels.stress_divergence(d, self.nbr, self.mask, self.sc, self.se,
+        kernels.stress_divergence(d, part.tiles, self.nbr, self.mask, self.sc, self.se,
                                   self.spacing ** (d - 1), x, self._mass_or_mask(), self.shift, y)
 
     def apply_unmasked(self, x, y) -> None:
@@ -143,6 +169,16 @@ def dof_bodies(level: Level, index: np.ndarray, comp: np.ndarray) -> np.ndarray:
     return body
 
 
+def weights(fractions: np.ndarray) -> np.ndarray:
+    """Exact fractions as the operator weighs them: within ROUNDOFF of 1 they are 1, and a weight
+    below MIN_FRACTION is raised to it. Tiny weights make local modes that are almost decoupled
+    from the body; no coarse grid sees them, so CG spends an iteration on each (sphere, 128^3: 53
+    iterations instead of 24). The added stiffness is at most MIN_FRACTION h^d of strain energy
+    density per sliver control volume."""
+    v = np.where(fractions > 1.0 - ROUNDOFF, 1.0, fractions)
+    return np.where((v > 0) & (v < MIN_FRACTION), MIN_FRACTION, v)
+
+
 def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
     """The finest level: the kept tiles are those touching material, with exact fractions."""
     grid = fractions.grid
@@ -156,13 +192,9 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
     vc = layout.load(fractions.control[cell_offset])
     ve = np.stack([layout.load(fractions.control[s]) for s in edge_offsets])
     vf = np.stack([layout.load(fractions.control[s]) for s in unit])
-    # Slivers: a weight below MIN_FRACTION is raised to it. Tiny weights make local modes that are
-    # almost decoupled from the body; no coarse grid sees them, so CG spends an iteration on each
-    # (sphere, 128^3: 53 iterations instead of 24). The added stiffness is at most MIN_FRACTION h^d
-    # of strain energy density per sliver control volume.
+    vf = np.where(vf > 1.0 - ROUNDOFF, 1.0, vf)
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
-    vc = np.where((vc > 0) & (vc < MIN_FRACTION), MIN_FRACTION, vc)
-    ve = np.where((ve > 0) & (ve < MIN_FRACTION), MIN_FRACTION, ve)
+    vc, ve = weights(vc), weights(ve)
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu)
     level.slivers = slivers
     return level
