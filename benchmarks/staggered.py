@@ -1,6 +1,6 @@
 """Staggered method floors: a sphere shell solved statically, operator throughput, multigrid iterations.
 
-    .venv/bin/python -m benchmarks.staggered [--resolution 256] [--repeats 1] [--arch cpu] [--json out.json]
+    .venv/bin/python -m benchmarks.staggered [--resolution 256] [--repeats 1] [--arch cpu] [--precision f64] [--json out.json]
     .venv/bin/python -m benchmarks.staggered --iterations 32 64 128 --nu 0.3 0.45 0.49
 
 Every job runs in its own spawned process (peak memory is that job's alone); medians over repeats.
@@ -37,14 +37,14 @@ def sphere_mesh(path: Path) -> None:
     trimesh.creation.icosphere(subdivisions=5, radius=1.0).export(path)
 
 
-def job(mesh: str, resolution: int, nu: float, rtol: float, arch: str) -> dict:
+def job(mesh: str, resolution: int, nu: float, rtol: float, arch: str, precision: str = "f64") -> dict:
     return {
         "geometry": {"mesh": mesh},
         "grid": {"resolution": resolution},
         "material": {"youngs_modulus": 1e6, "poisson_ratio": nu, "density": 1000},
         "loads": {"gravity": [0, 0, -9.81]},
         "boundaries": [{"kind": "displacement", "name": "base", "region": {"box": [[-2, -2, -2], [2, 2, -0.8]]}, "value": [0, 0, 0]}],
-        "solver": {"rtol": rtol, "arch": arch, "max_iterations": 2000},
+        "solver": {"rtol": rtol, "arch": arch, "precision": precision, "max_iterations": 2000},
         "output": {"fields": ["displacement"], "surface": False},
     }
 
@@ -106,6 +106,7 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--arch", default="cpu")
+    ap.add_argument("--precision", default="f64", choices=("f64", "f32"), help="solver storage precision of the shell job")
     ap.add_argument("--iterations", type=int, nargs="*", help="resolutions of the multigrid iteration study (sphere)")
     ap.add_argument("--nu", type=float, nargs="*", default=[0.3])
     ap.add_argument("--json")
@@ -128,7 +129,8 @@ def main() -> None:
             out["throughput"] = tp
             print(f"operator: {tp['apply_s'] * 1e3:.1f} ms per apply, {tp['apply_dofs_per_s'] / 1e6:.1f} M DOF/s, "
                   f"copy {tp['copy_GBps']:.1f} GB/s", flush=True)
-            runs = [run_isolated(_solve, job(str(shell), args.resolution, 0.3, 1e-6, args.arch)) for _ in range(args.repeats)]
+            runs = [run_isolated(_solve, job(str(shell), args.resolution, 0.3, 1e-6, args.arch, args.precision))
+                    for _ in range(args.repeats)]
             out["shell"] = runs
             wall = statistics.median(r["wall_s"] for r in runs)
             peak = statistics.median(r["peak_bytes"] for r in runs)

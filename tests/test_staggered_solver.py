@@ -81,6 +81,7 @@ def test_f32_solves_to_its_precision_and_stops_honestly_below_it(tmp_path):
     assert "Warning" not in out.stderr  # no precision-loss warnings from the kernels
     out = subprocess.run(cmd + [str(bad), "-o", str(tmp_path / "bad.h5")], capture_output=True, text=True)
     assert out.returncode == 2 and "solver:" in out.stderr and "Traceback" not in out.stderr
+    assert "true relative residual" in out.stderr  # the precision named, not a Jacobi retry's stagnation
     assert not (tmp_path / "bad.h5").exists()
 
 
