@@ -119,6 +119,12 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_serve(args) -> int:
+    from service.server import serve  # lazily: the engine does not depend on the service
+
+    return serve(args.host, args.port, args.log_level)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -147,6 +153,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--arch", choices=("cpu", "cuda", "auto"), help="override solver.arch")
     p.add_argument("--no-cache", action="store_true", help="recompute the cut-cell geometry")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("serve", help="run the job service (REST API + workers); settings from VOXELASTIC_* variables")
+    p.add_argument("--host", help="bind address (default VOXELASTIC_HOST or 127.0.0.1)")
+    p.add_argument("--port", type=int, help="port (default VOXELASTIC_PORT or 8000)")
+    p.add_argument("--log-level", default="info", choices=("critical", "error", "warning", "info", "debug"))
+    p.set_defaults(func=cmd_serve)
     return ap
 
 

@@ -1,0 +1,240 @@
+"""Job service floors (issue 5), measured on a real ``voxelastic serve`` over loopback HTTP.
+
+    .venv/bin/python -m benchmarks.service [--repeats 3] [--seconds 10] [--json service.json]
+
+1. Status requests while 2 jobs run: ``GET /jobs/{id}`` from 4 keep-alive connections for
+   ``--seconds``; requests per second and latency percentiles (floor: >= 200/s, p99 < 50 ms).
+   The load generator is plain asyncio sockets, so the client costs little of the 2 cores.
+2. 100 submissions (multipart, the small example job) from 4 threads: time until all 100 are
+   accepted (floor: < 10 s).
+3. Service overhead over the bare CLI for the same job (the example cantilever at
+   ``--resolution``, geometry cache off on both sides): CLI = ``voxelastic run`` as a process;
+   service = POST until the HDF5 is downloaded, with a warm worker. Medians of ``--repeats``
+   (floor: service < 1.1 x CLI). Also reported: the service's own share, i.e. end to end minus
+   the time the worker spent inside ``engine.pipeline.run`` + writing the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import platform
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "cantilever.json"
+MESH = (ROOT / "examples" / "cantilever.stl").read_bytes()
+
+
+def spec(resolution: int, analysis: dict | None = None) -> dict:
+    s = json.loads(EXAMPLE.read_text())
+    s["grid"] = {"resolution": resolution, "padding": 1}
+    if analysis:
+        s["analysis"] = analysis
+    return s
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Service:
+    def __init__(self, workdir: Path, cache_dir: str, **settings):
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = dict(os.environ, VOXELASTIC_DATA_DIR=str(workdir / "data"), VOXELASTIC_CACHE_DIR=cache_dir,
+                   TI_SKIP_VERSION_CHECK="ON")
+        env.update({f"VOXELASTIC_{k.upper()}": str(v) for k, v in settings.items()})
+        self.log = open(workdir / "server.log", "wb")
+        self.proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "serve", "--port", str(self.port),
+                                      "--log-level", "warning"], cwd=ROOT, env=env, stdout=self.log,
+                                     stderr=subprocess.STDOUT)
+        self.client = httpx.Client(base_url=self.url, timeout=120)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            try:
+                h = self.client.get("/health").json()
+                if h["queue"].get("processes_alive") == h["queue"].get("workers"):
+                    return
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.2)
+        raise RuntimeError("service did not start")
+
+    def submit(self, job: dict, client: httpx.Client | None = None) -> str:
+        r = (client or self.client).post("/jobs", data={"spec": json.dumps(job)}, files={"mesh": ("cantilever.stl", MESH)})
+        assert r.status_code == 202, r.text
+        return r.json()["id"]
+
+    def wait(self, job_id: str, statuses=("succeeded", "failed", "cancelled"), poll: float = 0.05) -> dict:
+        while True:
+            job = self.client.get(f"/jobs/{job_id}").json()
+            if job["status"] in statuses:
+                return job
+            time.sleep(poll)
+
+    def close(self) -> None:
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(60)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+        self.client.close()
+
+
+# --- 1. status requests while jobs run ----------------------------------------------------------
+
+
+async def _hammer(port: int, path: str, seconds: float, connections: int) -> list[float]:
+    request = f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode()
+    latencies: list[float] = []
+    stop = time.perf_counter() + seconds
+
+    async def one() -> None:
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        while time.perf_counter() < stop:
+            t = time.perf_counter()
+            writer.write(request)
+            head = await reader.readuntil(b"\r\n\r\n")
+            assert head.startswith(b"HTTP/1.1 200"), head[:60]
+            length = next(int(line.split(b":")[1]) for line in head.split(b"\r\n")
+                          if line.lower().startswith(b"content-length"))
+            await reader.readexactly(length)
+            latencies.append(time.perf_counter() - t)
+        writer.close()
+
+    await asyncio.gather(*(one() for _ in range(connections)))
+    return latencies
+
+
+def status_load(svc: Service, seconds: float, connections: int = 4) -> dict:
+    running = [svc.submit(spec(64, {"kind": "dynamic", "time_step": 1e-3, "steps": 2000})) for _ in range(2)]
+    for job_id in running:
+        svc.wait(job_id, ("running",))
+    time.sleep(1.0)  # both workers computing
+    t = time.perf_counter()
+    lat = asyncio.run(_hammer(svc.port, f"/jobs/{running[0]}", seconds, connections))
+    elapsed = time.perf_counter() - t
+    busy = [svc.client.get(f"/jobs/{j}").json()["status"] for j in running]
+    for job_id in running:
+        svc.client.delete(f"/jobs/{job_id}")
+    lat.sort()
+
+    def pct(p: float) -> float:
+        return 1000 * lat[min(len(lat) - 1, int(p * len(lat)))]
+
+    return {"requests": len(lat), "seconds": elapsed, "requests_per_s": len(lat) / elapsed, "connections": connections,
+            "p50_ms": pct(0.50), "p90_ms": pct(0.90), "p99_ms": pct(0.99), "max_ms": 1000 * lat[-1],
+            "jobs_still_running_after": busy}
+
+
+# --- 2. submissions -------------------------------------------------------------------------------
+
+
+def submissions(svc: Service, count: int = 100, threads: int = 4) -> dict:
+    clients = [httpx.Client(base_url=svc.url, timeout=120) for _ in range(threads)]
+    job = spec(16)
+    t = time.perf_counter()
+    with ThreadPoolExecutor(threads) as pool:
+        ids = list(pool.map(lambda i: svc.submit(job, clients[i % threads]), range(count)))
+    accepted = time.perf_counter() - t
+    for c in clients:
+        c.close()
+    statuses = [svc.wait(i)["status"] for i in ids]
+    return {"submissions": count, "threads": threads, "accepted_seconds": accepted,
+            "per_submission_ms": 1000 * accepted / count, "all_finished_seconds": time.perf_counter() - t,
+            "succeeded": statuses.count("succeeded")}
+
+
+# --- 3. overhead over the CLI ---------------------------------------------------------------------
+
+
+def cli_run(job: dict, workdir: Path, cache_dir: str) -> float:
+    d = Path(tempfile.mkdtemp(dir=workdir))
+    (d / "job.json").write_text(json.dumps(job))
+    (d / "cantilever.stl").write_bytes(MESH)
+    t = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(d / "job.json"), "-o", str(d / "r.h5"),
+                          "--no-cache"], capture_output=True, text=True,
+                         env=dict(os.environ, VOXELASTIC_CACHE_DIR=cache_dir, TI_SKIP_VERSION_CHECK="ON"))
+    seconds = time.perf_counter() - t
+    assert out.returncode == 0, out.stderr
+    return seconds
+
+
+def service_run(svc: Service, job: dict) -> tuple[float, float]:
+    t = time.perf_counter()
+    job_id = svc.submit(job)
+    done = svc.wait(job_id)
+    assert done["status"] == "succeeded", done
+    data = svc.client.get(f"/jobs/{job_id}/result").content
+    seconds = time.perf_counter() - t
+    assert len(data) == done["result"]["bytes"]
+    return seconds, done["summary"]["seconds"]
+
+
+def overhead(svc: Service, workdir: Path, cache_dir: str, resolution: int, repeats: int) -> dict:
+    job = spec(resolution)
+    cli_run(job, workdir, cache_dir)  # warm the offline cache for this job's kernels
+    service_run(svc, job)  # ... and each worker that may take it
+    service_run(svc, job)
+    cli, srv, inside = [], [], []
+    for _ in range(repeats):
+        cli.append(cli_run(job, workdir, cache_dir))
+        s, w = service_run(svc, job)
+        srv.append(s)
+        inside.append(w)
+    c, s = statistics.median(cli), statistics.median(srv)
+    return {"resolution": resolution, "cli_seconds": c, "cli_all": cli, "service_seconds": s, "service_all": srv,
+            "ratio": s / c, "service_share_seconds": statistics.median(a - b for a, b in zip(srv, inside, strict=True))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=10.0, help="duration of the status-request load")
+    ap.add_argument("--resolution", type=int, default=96, help="cells along the cantilever for the overhead job")
+    ap.add_argument("--json", help="write the figures to this file")
+    args = ap.parse_args(argv)
+    workdir = Path(tempfile.mkdtemp(prefix="voxelastic-bench-service-"))
+    cache_dir = os.environ.get("VOXELASTIC_CACHE_DIR") or str(workdir / "cache")
+    results: dict = {"machine": f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} cores"}
+    svc = Service(workdir, cache_dir, workers=2, geometry_cache="false")
+    try:
+        svc.wait(svc.submit(spec(16)))  # first job of each worker compiles or loads kernels
+        svc.wait(svc.submit(spec(16)))
+        results["status_load"] = a = status_load(svc, args.seconds)
+        print(f"status requests while 2 jobs run: {a['requests_per_s']:.0f}/s over {a['connections']} connections, "
+              f"p50 {a['p50_ms']:.1f} ms, p99 {a['p99_ms']:.1f} ms, max {a['max_ms']:.1f} ms (jobs {a['jobs_still_running_after']})")
+        results["submissions"] = b = submissions(svc)
+        print(f"100 submissions accepted in {b['accepted_seconds']:.2f} s ({b['per_submission_ms']:.1f} ms each); "
+              f"all {b['succeeded']} succeeded after {b['all_finished_seconds']:.1f} s")
+        results["overhead"] = c = overhead(svc, workdir, cache_dir, args.resolution, args.repeats)
+        print(f"cantilever {c['resolution']}: CLI {c['cli_seconds']:.2f} s {[round(x, 2) for x in c['cli_all']]}, "
+              f"service {c['service_seconds']:.2f} s {[round(x, 2) for x in c['service_all']]}: "
+              f"ratio {c['ratio']:.3f}; service's own share {c['service_share_seconds']:.3f} s")
+    finally:
+        svc.close()
+        shutil.rmtree(workdir, ignore_errors=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

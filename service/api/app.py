@@ -1,0 +1,129 @@
+"""The FastAPI application: wiring of settings, store, storage and queue; error shapes; limits.
+
+``create_app(settings)`` builds an app whose lifespan opens the job table, starts the queue
+(the local pool's worker processes, or nothing for Celery) and stops it again.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import asynccontextmanager
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.concurrency import run_in_threadpool
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from ..queue import make_queue
+from ..settings import Settings, get_settings
+from ..storage import Storage
+from ..store import JobStore
+from .deps import require_token
+from .routes import jobs, system
+
+log = logging.getLogger("voxelastic.api")
+
+DESCRIPTION = """Simulation jobs of voxelastic: submit a job spec with its mesh, follow its
+progress, download the HDF5 result (+ XDMF sidecar). With `VOXELASTIC_TOKENS` set, every endpoint
+but `/health` needs `Authorization: Bearer <token>`."""
+
+
+class UploadLimit:
+    """413 for a ``POST /jobs`` body over ``limit`` bytes, before the whole body is read.
+
+    A declared Content-Length over the limit is refused at once; a body without one is counted
+    as it arrives and cut off at the limit (the app's own answer is then replaced by the 413).
+    """
+
+    def __init__(self, app: ASGIApp, limit: int):
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "POST" or scope["path"].rstrip("/") != "/jobs":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope["headers"]).get(b"content-length")
+        if declared is not None and declared.isdigit() and int(declared) > self.limit:
+            await self._refuse(send, int(declared))
+            return
+        seen = 0
+        over = False
+
+        async def counting_receive() -> Message:
+            nonlocal seen, over
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.limit:
+                    over = True
+                    return {"type": "http.disconnect"}
+            return message
+
+        started = False
+
+        async def guarded_send(message: Message) -> None:
+            nonlocal started
+            if over:
+                return  # the app saw a cut-off body; our 413 goes out instead
+            started = True
+            await send(message)
+
+        await self.app(scope, counting_receive, guarded_send)
+        if over and not started:
+            await self._refuse(send, seen)
+
+    async def _refuse(self, send: Send, size: int) -> None:
+        body = JSONResponse(
+            {"detail": f"request body of {size} bytes or more exceeds the upload limit of {self.limit} bytes "
+                       "(VOXELASTIC_MAX_UPLOAD_BYTES)"},
+            status_code=413,
+        )
+        await send({"type": "http.response.start", "status": 413, "headers": body.raw_headers})
+        await send({"type": "http.response.body", "body": body.body})
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The API with its own store, storage and queue (started and stopped by the lifespan)."""
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        store = JobStore(settings.db_url)
+        storage = Storage(settings.data_dir)
+        queue = make_queue(store, storage, settings)
+        await run_in_threadpool(queue.start)
+        app.state.settings, app.state.store, app.state.storage, app.state.queue = settings, store, storage, queue
+        log.info("voxelastic service: queue=%s, data in %s", queue.backend, settings.data_dir)
+        try:
+            yield
+        finally:
+            await run_in_threadpool(queue.stop)
+            store.close()
+
+    from engine import __version__
+
+    app = FastAPI(
+        title="voxelastic",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        openapi_url=None,  # served by system.router, behind the same authentication
+        docs_url=None,
+        redoc_url=None,
+    )
+    app.state.settings = settings
+    app.add_middleware(UploadLimit, limit=settings.max_upload_bytes)
+    authorized = [Depends(require_token)]
+    app.include_router(system.public)
+    app.include_router(jobs.router, dependencies=authorized)
+    app.include_router(system.router, dependencies=authorized)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        # the same compact shape as our own 422s; echoing the input back would return whole uploads
+        detail = [{"loc": list(e.get("loc", ())), "msg": e.get("msg", ""), "type": e.get("type", "")} for e in exc.errors()]
+        return JSONResponse({"detail": detail}, status_code=422)
+
+    return app

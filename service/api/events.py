@@ -1,0 +1,62 @@
+"""Server-sent events of a job: a snapshot whenever it changes, until it ends.
+
+Works the same for both queue backends because it follows the job table (the ``revision`` column
+moves with every change), not an in-process channel: a Celery worker on another machine updates
+the row, the API streams it. Event ids are revisions, so a client reconnecting with
+``Last-Event-ID`` gets only what it has not seen.
+
+    event: progress            (queued / running snapshots)
+    id: 7
+    data: {...GET /jobs/{id} as JSON, without "spec"...}
+
+    event: end                 (the terminal snapshot; then the stream closes)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from collections.abc import AsyncIterator
+
+from starlette.concurrency import run_in_threadpool
+
+from .models import job_out
+from ..store import JobStore
+
+POLL = 0.2  # seconds between looks at the row
+KEEPALIVE = 15.0  # a comment line this often keeps proxies from closing an idle stream
+
+
+def _snapshot(job) -> str:
+    # the job as GET /jobs/{id} shows it, less the spec: that never changes and is the bulk of it
+    return job_out(job).model_dump_json(exclude={"spec"})
+
+
+def format_event(event: str, data: str, event_id: int | None = None) -> str:
+    lines = [f"event: {event}"]
+    if event_id is not None:
+        lines.append(f"id: {event_id}")
+    lines += [f"data: {line}" for line in data.splitlines() or [""]]
+    return "\n".join(lines) + "\n\n"
+
+
+async def job_events(store: JobStore, job_id: str, last_seen: int | None = None) -> AsyncIterator[str]:
+    """Yield SSE frames for ``job_id`` until it reaches a terminal status (or is deleted)."""
+    last, quiet_since = last_seen, time.monotonic()
+    yield "retry: 1000\n\n"
+    while True:
+        job = await run_in_threadpool(store.get, job_id)
+        if job is None:
+            yield format_event("deleted", json.dumps({"id": job_id}))
+            return
+        if job.terminal:
+            yield format_event("end", _snapshot(job), job.revision)
+            return
+        if job.revision != last:
+            last, quiet_since = job.revision, time.monotonic()
+            yield format_event("progress", _snapshot(job), job.revision)
+        elif time.monotonic() - quiet_since > KEEPALIVE:
+            quiet_since = time.monotonic()
+            yield ": keep-alive\n\n"
+        await asyncio.sleep(POLL)

@@ -1,0 +1,1 @@
+"""Route modules: ``jobs`` (the job resource) and ``system`` (health, metrics, OpenAPI)."""

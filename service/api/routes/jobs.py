@@ -1,0 +1,164 @@
+"""The job resource: submit, inspect, follow, download, cancel/delete. Handlers stay thin."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, Header, HTTPException, Query, Request, Response, UploadFile, status
+from fastapi.responses import FileResponse, StreamingResponse
+
+from ...admission import Rejected
+from ...jobs import QueueFull, QueueUnavailable, cancel_or_delete, submit
+from ...store import IdempotencyConflict, JobStatus
+from ..deps import JobDep, QueueDep, SettingsDep, StorageDep, StoreDep
+from ..events import job_events
+from ..models import JobOut, JobPage, job_out
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+HDF5_TYPE = "application/x-hdf5"
+XDMF_TYPE = "application/xml"
+
+_ERRORS = {
+    401: {"description": "Missing or invalid bearer token (when tokens are configured)."},
+    404: {"description": "No such job."},
+}
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=JobOut,
+    responses={
+        **_ERRORS,
+        409: {"description": "Idempotency-Key reused for a different submission."},
+        413: {"description": "Request body over VOXELASTIC_MAX_UPLOAD_BYTES."},
+        422: {"description": "Invalid spec or mesh, too many facets, grid over the memory limit (field path + reason)."},
+        429: {"description": "Queue full; see Retry-After."},
+        503: {"description": "The job queue (broker) is unavailable."},
+    },
+    summary="Submit a job (multipart: spec JSON + mesh file)",
+)
+def create_job(
+    response: Response,
+    settings: SettingsDep,
+    store: StoreDep,
+    storage: StorageDep,
+    queue: QueueDep,
+    spec: Annotated[
+        UploadFile | str, Form(description="The job spec as JSON (a text field or a file part; schemas/json/job.schema.json).")
+    ],
+    mesh: Annotated[UploadFile | None, File(description="The surface mesh; its file name's suffix tells the format.")] = None,
+    idempotency_key: Annotated[
+        str | None, Header(min_length=1, max_length=255, description="Repeat-safe submission: same key, same job.")
+    ] = None,
+) -> JobOut:
+    data = mesh.file.read() if mesh is not None else None
+    spec_text = spec if isinstance(spec, str) else spec.file.read()  # a text field, or a file part
+    try:
+        done = submit(store, storage, queue, settings, spec_text=spec_text, mesh=data,
+                      mesh_filename=mesh.filename if mesh is not None else None, idempotency_key=idempotency_key)
+    except Rejected as exc:
+        raise HTTPException(exc.status_code, detail=exc.errors) from None
+    except IdempotencyConflict as exc:
+        raise HTTPException(status.HTTP_409_CONFLICT, detail=str(exc)) from None
+    except QueueFull as exc:
+        raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS, detail=str(exc),
+                            headers={"Retry-After": str(exc.retry_after)}) from None
+    except QueueUnavailable as exc:
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc)) from None
+    response.headers["Location"] = f"/jobs/{done.job.id}"
+    if not done.created:
+        response.headers["Idempotent-Replayed"] = "true"
+    return job_out(done.job)
+
+
+@router.get("", response_model=JobPage, responses={401: _ERRORS[401]}, summary="List jobs, newest first")
+def list_jobs(
+    request: Request,
+    store: StoreDep,
+    limit: Annotated[int, Query(ge=1, le=200)] = 50,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
+    status_: Annotated[JobStatus | None, Query(alias="status")] = None,
+) -> JobPage:
+    items, total = store.list(limit=limit, offset=offset, status=status_.value if status_ else None)
+    nxt = None
+    if offset + len(items) < total:
+        nxt = str(request.url.include_query_params(offset=offset + limit, limit=limit))
+    return JobPage(items=[job_out(j) for j in items], total=total, limit=limit, offset=offset, next=nxt)
+
+
+@router.get("/{job_id}", response_model=JobOut, responses=_ERRORS, summary="Status, progress, timings, result links")
+def get_job(job: JobDep) -> JobOut:
+    return job_out(job)
+
+
+@router.get(
+    "/{job_id}/events",
+    responses={**_ERRORS, 200: {"content": {"text/event-stream": {}}, "description": "Progress snapshots until the end."}},
+    summary="Server-sent events of a job until it ends",
+)
+def job_event_stream(
+    job: JobDep, store: StoreDep, last_event_id: Annotated[int | None, Header(ge=0, le=2**62)] = None
+) -> StreamingResponse:
+    return StreamingResponse(
+        job_events(store, job.id, last_event_id),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )
+
+
+def _finished_file(job, path, media_type: str) -> FileResponse:
+    if job.status != JobStatus.succeeded.value:
+        raise HTTPException(
+            status.HTTP_409_CONFLICT,
+            detail=f"job {job.id} is {job.status}; a result exists only once it has succeeded",
+        )
+    if not path.is_file():  # deleted between the status read and now
+        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"the result of job {job.id} is gone")
+    return FileResponse(path, media_type=media_type, filename=path.name)
+
+
+@router.get(
+    "/{job_id}/result",
+    response_class=FileResponse,
+    responses={**_ERRORS, 200: {"content": {HDF5_TYPE: {}}, "description": "The HDF5 result file."},
+               206: {"description": "Partial content (Range)."}, 409: {"description": "Not (successfully) finished."},
+               416: {"description": "Range not satisfiable."}},
+    summary="Download the HDF5 result (Range requests supported)",
+)
+def get_result(job: JobDep, storage: StorageDep) -> FileResponse:
+    return _finished_file(job, storage.result_path(job.id), HDF5_TYPE)
+
+
+@router.get(
+    "/{job_id}/result.xdmf",
+    response_class=FileResponse,
+    responses={**_ERRORS, 200: {"content": {XDMF_TYPE: {}}, "description": "XDMF sidecar (refers to <id>.h5)."},
+               409: {"description": "Not (successfully) finished."}},
+    summary="Download the XDMF sidecar of the result",
+)
+def get_result_xdmf(job: JobDep, storage: StorageDep) -> FileResponse:
+    return _finished_file(job, storage.xdmf_path(job.id), XDMF_TYPE)
+
+
+@router.delete(
+    "/{job_id}",
+    responses={
+        **_ERRORS,
+        200: {"model": JobOut, "description": "Cancelled (queued, or running and its worker stopped)."},
+        202: {"model": JobOut, "description": "Cancellation requested; the worker has not confirmed yet."},
+        204: {"description": "A finished job, deleted with its files."},
+        409: {"description": "The job finished before it could be cancelled (DELETE again to remove it)."},
+    },
+    summary="Cancel a queued/running job, or delete a finished one",
+)
+def delete_job(job: JobDep, store: StoreDep, storage: StorageDep) -> Response:
+    outcome = cancel_or_delete(store, storage, job)
+    if outcome.outcome == "deleted":
+        return Response(status_code=status.HTTP_204_NO_CONTENT)
+    if outcome.outcome == "finished":
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            detail=f"job {job.id} already {outcome.job.status}; DELETE again to remove it")
+    code = status.HTTP_200_OK if outcome.outcome == "cancelled" else status.HTTP_202_ACCEPTED
+    return Response(job_out(outcome.job).model_dump_json(), status_code=code, media_type="application/json")

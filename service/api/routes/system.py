@@ -1,0 +1,55 @@
+"""Health, metrics and the API's own documentation."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request, Response
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import HTMLResponse, JSONResponse
+
+from ... import metrics
+from ..deps import QueueDep, StoreDep
+from ..models import Health
+
+public = APIRouter(tags=["system"])
+router = APIRouter(tags=["system"])
+
+
+@public.get(
+    "/health",
+    response_model=Health,
+    responses={503: {"model": Health, "description": "The database or the queue does not answer."}},
+    summary="Liveness and readiness: database and queue checked (no authentication)",
+)
+def health(request: Request, store: StoreDep, queue: QueueDep) -> JSONResponse:
+    from engine import __version__
+
+    try:
+        store.ping()
+        database = "ok"
+    except Exception as exc:
+        database = f"unreachable: {type(exc).__name__}"
+    queue_ok, queue_info = queue.health()
+    ok = database == "ok" and queue_ok
+    body = Health(status="ok" if ok else "unavailable", database=database, queue=queue_info, version=__version__)
+    return JSONResponse(body.model_dump(), status_code=200 if ok else 503)
+
+
+@router.get(
+    "/metrics",
+    response_class=Response,
+    responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format 0.0.4."}},
+    summary="Prometheus metrics: jobs by status, durations, queue length",
+)
+def get_metrics(store: StoreDep, queue: QueueDep) -> Response:
+    _, info = queue.health()
+    return Response(metrics.render(store, info), media_type=metrics.CONTENT_TYPE)
+
+
+@router.get("/openapi.json", include_in_schema=False)
+def openapi_document(request: Request) -> JSONResponse:
+    return JSONResponse(request.app.openapi())
+
+
+@router.get("/docs", include_in_schema=False)
+def swagger_ui() -> HTMLResponse:
+    return get_swagger_ui_html(openapi_url="/openapi.json", title="voxelastic API")

@@ -1,0 +1,127 @@
+"""Job operations behind the routes: submit (with admission checks), cancel or delete.
+
+Route handlers stay thin; everything that decides something lives here or in the store.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+from .admission import check_submission
+from .queue import Queue
+from .settings import Settings
+from .storage import Storage, display_name, new_job_id
+from .store import Job, JobStore, request_hash, utcnow
+
+
+class QueueFull(Exception):
+    """Too many queued jobs; ``retry_after`` is a guess of when a slot frees up [s]."""
+
+    def __init__(self, queued: int, retry_after: int):
+        super().__init__(f"{queued} jobs are queued, the limit is reached (VOXELASTIC_MAX_QUEUED); retry later")
+        self.retry_after = retry_after
+
+
+class QueueUnavailable(Exception):
+    """The broker refused the job (Celery backend)."""
+
+
+@dataclass
+class Submitted:
+    job: Job
+    created: bool  # False: an earlier job with the same Idempotency-Key
+
+
+def submit(
+    store: JobStore,
+    storage: Storage,
+    queue: Queue,
+    settings: Settings,
+    *,
+    spec_text: str | bytes,
+    mesh: bytes | None,
+    mesh_filename: str | None,
+    idempotency_key: str | None,
+) -> Submitted:
+    """Check a submission, store its mesh and row (status queued) and hand it to the queue.
+
+    Raises ``admission.Rejected`` (422), ``store.IdempotencyConflict`` (409), :class:`QueueFull`
+    (429) or :class:`QueueUnavailable` (503).
+    """
+    admitted = check_submission(spec_text, mesh, mesh_filename, settings)
+    fingerprint = request_hash(admitted.spec_json, mesh or b"", admitted.suffix)
+    if idempotency_key is not None:
+        # a repeated request gets its job back even when the queue has filled up since
+        existing = store.for_idempotency_key(idempotency_key, fingerprint)
+        if existing is not None:
+            return Submitted(existing, False)
+    queued = store.queued_count()
+    if queued >= settings.max_queued:
+        raise QueueFull(queued, retry_after(store, settings, queued))
+
+    spec = admitted.spec
+    job = Job(
+        id=new_job_id(),
+        status="queued",
+        created_at=utcnow(),
+        spec=admitted.spec_json,
+        mesh_suffix=admitted.suffix,
+        mesh_name=display_name(mesh_filename or spec.geometry.mesh, admitted.suffix) if mesh else "",
+        mesh_bytes=len(mesh or b""),
+        precision=spec.solver.precision,
+        arch=spec.solver.arch,
+        request_hash=fingerprint,
+        idempotency_key=idempotency_key,
+        summary={"triangles": admitted.triangles, "grid": list(admitted.grid_shape),
+                 "memory_estimate_bytes": admitted.memory_estimate},
+    )
+    if mesh:
+        storage.save_mesh(job.id, admitted.suffix, mesh)
+    stored, created = store.create(job)
+    if not created:  # lost a race with the same Idempotency-Key
+        storage.delete(job.id)
+        return Submitted(stored, False)
+    try:
+        queue.enqueue(job.id)
+    except Exception as exc:
+        store.fail_queued(job.id, f"the job queue is unavailable: {type(exc).__name__}: {exc}", "internal")
+        raise QueueUnavailable(f"the job queue is unavailable ({type(exc).__name__}); the job was not queued") from exc
+    return Submitted(stored, True)
+
+
+def retry_after(store: JobStore, settings: Settings, queued: int) -> int:
+    """Seconds until a queue slot is likely free: recent mean run time x queue depth / workers."""
+    mean = store.mean_run_seconds() or 10.0
+    return int(min(3600, max(1, math.ceil(mean * max(1, queued - settings.max_queued + 1) / settings.workers))))
+
+
+@dataclass
+class Removal:
+    outcome: str  # "deleted" | "cancelled" | "cancelling" | "finished"
+    job: Job | None
+
+
+def cancel_or_delete(store: JobStore, storage: Storage, job: Job, wait: float = 5.0) -> Removal:
+    """Delete a finished job with its files; cancel a queued or running one.
+
+    A running job's worker process is stopped by its supervisor within a fraction of a second;
+    this waits up to ``wait`` seconds for that so the answer usually carries the final status.
+    """
+    if job.terminal:
+        if store.delete(job.id):
+            storage.delete(job.id)
+            return Removal("deleted", None)
+        job = store.get(job.id) or job
+        return Removal("deleted", None) if job is None else Removal("finished", job)
+    current = store.request_cancel(job.id)
+    deadline = time.monotonic() + wait
+    while current is not None and not current.terminal and time.monotonic() < deadline:
+        time.sleep(0.05)
+        current = store.get(job.id)
+    if current is None:
+        return Removal("deleted", None)
+    if current.status == "cancelled":
+        return Removal("cancelled", current)
+    return Removal("finished" if current.terminal else "cancelling", current)

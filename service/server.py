@@ -1,0 +1,53 @@
+"""``voxelastic serve``: uvicorn with the API, the job table and (by default) the local worker pool."""
+
+from __future__ import annotations
+
+import fcntl
+import logging
+import os
+import sys
+from pathlib import Path
+
+from .settings import Settings
+
+
+def _data_dir_free(settings: Settings) -> str | None:
+    """None if no other server holds the data directory's lock, else a message saying who does."""
+    path = Path(settings.data_dir) / "server.lock"
+    if not path.exists():
+        return None
+    with open(path, "a+") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            return (f"another voxelastic server (pid {f.read().strip() or '?'}) uses {settings.data_dir}; "
+                    "stop it or set VOXELASTIC_DATA_DIR")
+        fcntl.flock(f, fcntl.LOCK_UN)
+    return None
+
+
+def serve(host: str | None = None, port: int | None = None, log_level: str = "info") -> int:
+    """Run the service in the foreground until SIGINT/SIGTERM; returns an exit code."""
+    import uvicorn
+
+    from .api.app import create_app
+
+    os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+    settings = Settings()
+    host = host or settings.host
+    port = settings.port if port is None else port
+    if settings.queue == "local":
+        busy = _data_dir_free(settings)
+        if busy:
+            print(f"error: {busy}", file=sys.stderr)
+            return 2
+    logging.basicConfig(level=getattr(logging, log_level.upper(), logging.INFO),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    print(f"voxelastic service on http://{host}:{port} (queue={settings.queue}, workers={settings.workers}, "
+          f"data={settings.data_dir}, auth={'on' if settings.tokens else 'off'}); API docs at /docs",
+          file=sys.stderr, flush=True)
+    # one uvicorn process: the local pool lives in it (more API processes would each start a pool)
+    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level, access_log=False,
+                timeout_graceful_shutdown=10)
+    return 0
