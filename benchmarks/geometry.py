@@ -82,11 +82,20 @@ def _slicing(name: str, resolution: int, workers: int | None, queue) -> None:
 
 
 def run_isolated(target, *args) -> dict:
+    """``target(*args, queue)`` in a fresh spawned process; its result. A child that dies without
+    one (an exception, the OOM killer) raises instead of leaving the benchmark waiting forever."""
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     p = ctx.Process(target=target, args=(*args, queue))
     p.start()
-    out = queue.get()
+    while True:
+        try:
+            out = queue.get(timeout=1.0)
+            break
+        except Exception:  # queue.Empty: still working, or gone
+            if not p.is_alive() and queue.empty():
+                raise RuntimeError(f"{getattr(target, '__name__', target)}: the benchmark process ended with exit code "
+                                   f"{p.exitcode} and no result (its error is printed above)") from None
     p.join()
     return out
 

@@ -4,11 +4,12 @@ Coarse levels are rediscretised from averaged cell fractions (Zhu et al. 2010): 
 2h control volume is weighted by the solid fraction of the 2^d fine cells it is made of, so free
 surfaces stay implicit on every level. Transfers are the multilinear interpolation of each
 component on its own faces (which keeps rigid motions) and its transpose. A coarse DOF is
-prescribed when a quarter of the fine DOFs it interpolates to are. Smoothing is a Chebyshev polynomial in
-D^-1 A (symmetric, so the cycle is a valid CG preconditioner), with extra steps on a band around
-cut cells and prescribed DOFs, where the rediscretised coarse operator departs most from the
-fine one (the boundary smoothing of Zhu et al. 2010 and McAdams et al. 2010); the coarsest level
-is solved directly (sparse LU) with the rigid modes of floating bodies bordered out.
+prescribed when more than a quarter (by interpolation weight) of the fine DOFs it interpolates to
+are. Smoothing is a Chebyshev polynomial in D^-1 A (symmetric, so the cycle is a valid CG
+preconditioner), with extra steps on a band around cut cells and prescribed DOFs, where the
+rediscretised coarse operator departs most from the fine one (the boundary smoothing of Zhu et
+al. 2010 and McAdams et al. 2010); the coarsest level is solved directly (sparse LU) with the
+rigid modes of floating bodies bordered out.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ POWER_STEPS = 12
 # the free DOFs within one cell of a cut cell or a prescribed DOF. Near the surface the averaged
 # coarse fractions misjudge the energy of interpolated errors (the stationary V-cycle diverges
 # there: error growth 2.7 per cycle on the 64^3 sphere); the band costs a fraction of a sweep.
-# Shell 256^3 to 1e-6: 61 CG iterations without the band, 28 with it (details in docs/benchmarks.md).
+# Shell to 1e-6: 23 / 61 CG iterations at 128^3 / 256^3 without the band, 14 / 23 with it.
 BAND_DEGREE = 5
 BAND_SPREAD = 30.0
 # A coarse DOF is prescribed when more than this share (by interpolation weight) of the fine DOFs
@@ -47,7 +48,8 @@ BAND_SPREAD = 30.0
 # (they are masked) whose energy the coarse operator does not see: error growth per stationary
 # V-cycle on the 64^3 sphere clamped below z = -0.8 was 40 with a majority (1900 with 3/4),
 # 2.7 with "any"; but "any" grows the clamp by a coarse cell per level, and then CG iterations
-# rose (sphere 128^3: 31 with "any", 16 with 1/4, 16 with 1/2, all with the band smoothing).
+# rose (sphere 128^3 clamped below -0.7, degree-5 smoothing with the band: 31 iterations with
+# "any", 14 with 1/4, 16 with 1/2).
 FIXED_SHARE = 0.25
 
 
