@@ -2,6 +2,7 @@
 
     .venv/bin/python -m benchmarks.staggered [--resolution 256] [--repeats 1] [--arch cpu] [--precision f64] [--json out.json]
     .venv/bin/python -m benchmarks.staggered --iterations 32 64 128 --nu 0.3 0.45 0.49
+    .venv/bin/python -m benchmarks.staggered --growth 32 64 [--fixed-share 0.5] [--no-band]
 
 Every job runs in its own spawned process (peak memory is that job's alone); medians over repeats.
 The shell: outer radius 1, inner 0.6, clamped below z = -0.8, gravity; rtol 1e-6.
@@ -101,6 +102,44 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
     })
 
 
+def _growth(mesh: str, resolution: int, fixed_share: float | None, band: bool, queue) -> None:
+    """Error growth per stationary V-cycle, e <- (I - M A) e with a zero right-hand side, after 12
+    cycles (the dominant mode's factor; above 1 the cycle alone diverges and CG must absorb it)."""
+    import numpy as np
+
+    from engine.geometry.cache import GeometryCache
+    from engine.pipeline import Functions, Limits, prepare_geometry
+    from engine.runtime import init
+    from engine.staggered import multigrid
+    from engine.staggered.operator import device_array
+    from engine.staggered.problem import make_staggered
+    from schemas import parse_job
+
+    if fixed_share is not None:
+        multigrid.FIXED_SHARE = fixed_share
+    if not band:
+        multigrid.boundary_band = lambda level: None
+    init("cpu", "f64")
+    spec = parse_job(job(mesh, resolution, 0.3, 1e-8, "cpu"))
+    method = make_staggered(spec, prepare_geometry(spec, None, cache=GeometryCache(None), limits=Limits()), Functions())
+    level, mg = method.level, method.multigrid
+    y, z = level.zeros(), level.zeros()
+
+    def energy_norm(e):
+        level.apply(device_array(e), y)
+        return float(np.sqrt(np.sum(e * y.to_numpy())))
+
+    e = np.random.default_rng(1).standard_normal(level.free.shape) * level.free
+    e /= energy_norm(e)
+    for _ in range(12):
+        level.apply(device_array(e), y)
+        mg.precondition(device_array(-y.to_numpy()), z)
+        e = e + z.to_numpy() * level.free
+        factor = energy_norm(e)
+        e /= factor
+    queue.put({"growth": factor})
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=int, default=256)
@@ -109,6 +148,9 @@ def main() -> None:
     ap.add_argument("--precision", default="f64", choices=("f64", "f32"), help="solver storage precision of the shell job")
     ap.add_argument("--iterations", type=int, nargs="*", help="resolutions of the multigrid iteration study (sphere)")
     ap.add_argument("--nu", type=float, nargs="*", default=[0.3])
+    ap.add_argument("--growth", type=int, nargs="*", help="resolutions of the stationary V-cycle study (sphere)")
+    ap.add_argument("--fixed-share", type=float, help="override multigrid.FIXED_SHARE in the V-cycle study")
+    ap.add_argument("--no-band", action="store_true", help="V-cycle study without the boundary smoothing")
     ap.add_argument("--json")
     args = ap.parse_args()
     out: dict = {"machine": platform.platform(), "cpus": mp.cpu_count()}
@@ -116,7 +158,13 @@ def main() -> None:
         shell, sphere = Path(tmp) / "shell.stl", Path(tmp) / "sphere.stl"
         shell_mesh(shell)
         sphere_mesh(sphere)
-        if args.iterations:
+        if args.growth:
+            out["growth"] = []
+            for n in args.growth:
+                r = run_isolated(_growth, str(sphere), n, args.fixed_share, not args.no_band)
+                out["growth"].append({"resolution": n, "fixed_share": args.fixed_share, "band": not args.no_band, **r})
+                print(f"sphere {n}^3: error growth {r['growth']:.3g} per V-cycle", flush=True)
+        elif args.iterations:
             rows = []
             for nu in args.nu:
                 for n in args.iterations:

@@ -38,17 +38,18 @@ MARGIN = 1.1
 POWER_STEPS = 12
 # Boundary smoothing: BAND_DEGREE more Chebyshev steps on [UPPER / BAND_SPREAD, UPPER], only on
 # the free DOFs within one cell of a cut cell or a prescribed DOF. Near the surface the averaged
-# coarse fractions misjudge the energy of interpolated errors (the stationary V-cycle diverges
-# there: error growth 2.7 per cycle on the 64^3 sphere); the band costs a fraction of a sweep.
-# Shell to 1e-6: 23 / 61 CG iterations at 128^3 / 256^3 without the band, 14 / 23 with it.
+# coarse fractions misjudge the energy of interpolated errors: on the 64^3 sphere the stationary
+# V-cycle's error grows 5.2x per cycle without the band, 1.1x with it (benchmarks/staggered.py
+# --growth). Shell to 1e-6: 23 / 61 CG iterations at 128^3 / 256^3 before the band and the
+# quarter-share rule below, 14 / 23 with them.
 BAND_DEGREE = 5
 BAND_SPREAD = 30.0
 # A coarse DOF is prescribed when more than this share (by interpolation weight) of the fine DOFs
 # it interpolates to are. A free coarse DOF interpolating onto prescribed fine ones makes a jump
 # (they are masked) whose energy the coarse operator does not see: error growth per stationary
-# V-cycle on the 64^3 sphere clamped below z = -0.8 was 40 with a majority (1900 with 3/4),
-# 2.7 with "any"; but "any" grows the clamp by a coarse cell per level, and then CG iterations
-# rose (sphere 128^3 clamped below -0.7, degree-5 smoothing with the band: 31 iterations with
+# V-cycle (64^3 sphere clamped below z = -0.8, no band) 51.5 with a majority, 2520 with 3/4,
+# 5.2 with 1/4 or "any"; but "any" grows the clamp by a coarse cell per level, and then CG
+# iterations rose (sphere 128^3 clamped below -0.7, degree-5 smoothing with the band: 31 with
 # "any", 14 with 1/4, 16 with 1/2).
 FIXED_SHARE = 0.25
 
