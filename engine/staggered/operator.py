@@ -61,7 +61,6 @@ class Part:
 
     tiles: object
     stress: object
-    count: int
 
 
 class Level:
@@ -79,7 +78,7 @@ class Level:
         self.tmap = device_array(layout.tile_map.astype(np.int32))
         self.nbr = device_array(layout.neighbours())
         every = device_array(np.arange(layout.count, dtype=np.int32))
-        self.everywhere = Part(every, every, layout.count)
+        self.everywhere = Part(every, every)
         self.vc, self.ve = device_array(vc), device_array(ve)
         active = device_array(np.zeros((d, size), dtype=np.int32))
         kernels.active_faces(d, self.coords, self.tmap, self.vc, active)
@@ -132,7 +131,7 @@ class Level:
         tiles = np.unique(np.asarray(tiles, dtype=np.int32))
         halo = np.unique(self.layout.neighbours()[tiles])
         halo = halo[halo < self.layout.count]
-        return Part(device_array(tiles), device_array(halo.astype(np.int32)), len(tiles))
+        return Part(device_array(tiles), device_array(halo.astype(np.int32)))
 
     def apply(self, x, y, part: Part | None = None) -> None:
         """y = A x on the free DOFs (x must vanish off them); only in ``part``'s tiles when given."""
