@@ -231,19 +231,12 @@ def run(
 
     init(spec.solver.arch, spec.solver.precision)
     geo = prepare_geometry(spec, mesh, filename=filename, base_dir=base_dir, progress=progress, cache=cache, limits=limits)
-    if spec.method.kind != "staggered":
-        raise MethodUnavailableError(
-            f"method.kind: the '{spec.method.kind}' solver is not available in voxelastic {__version__} yet; "
-            f"geometry stages completed ({'x'.join(map(str, geo.grid.shape))} grid, "
-            f"solid volume {_solid_volume(geo):.6g}); no fields were computed"
-        )
     from .analysis import run_analysis
-    from .staggered.problem import make_staggered
 
     times = dict(geo.stage_times)
     t = time.perf_counter()
     progress("discretization", 0.32, {})
-    method = make_staggered(spec, geo, functions or Functions())
+    method = _discretize(spec, geo, functions or Functions())
     times["discretization"] = time.perf_counter() - t
     t = time.perf_counter()
     outcome = run_analysis(method, spec.analysis, spec.output, progress)
@@ -261,6 +254,16 @@ def run(
     )
     progress("done", 1.0, {"iterations": outcome.iterations, "residual": outcome.residual})
     return result
+
+
+def _discretize(spec: JobSpec, geo: Geometry, functions: Functions):
+    if spec.method.kind == "dg":
+        from .dg.problem import make_dg
+
+        return make_dg(spec, geo, functions)
+    from .staggered.problem import make_staggered
+
+    return make_staggered(spec, geo, functions)
 
 
 def _solid_volume(geo: Geometry) -> float:

@@ -1,0 +1,622 @@
+"""Hex-sliced DG linear elasticity (Kaufmann et al. 2009): setup, solves, fields.
+
+``DGElasticity`` is built once per geometry: elements (tiny pieces merged), orthonormal bases,
+element / interface / Nitsche blocks, loads, the rigid modes left free; then an analysis driver
+(``engine.analysis``) calls ``solve`` as often as it needs and ``fields`` per state. The system
+is factorised once per (penalty, time step, rotations) by a sparse Cholesky; an IP matrix that
+is not positive definite doubles the penalty and is refactorised (section 9.1), the penalty used
+being reported. Mass: the bases are orthonormal, so M = rho h^3 I and backward Euler only shifts
+the diagonal. ``material.model = "corotated"`` warps element and interface blocks by each
+element's rotation (section 6) and iterates the rotations to a fixed point per solve.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import BoundaryError, VoxelasticError
+from ..geometry.slicing import CutCells
+from ..geometry.surface import Surface
+from ..material import Material, von_mises
+from ..output import FieldData
+from ..regions import require_selection
+from ..solvers.cg import SolveStats
+from ..solvers.direct import Cholesky, NotPositiveDefinite
+from ..solvers.rigid import UnbalancedLoadError
+from . import assembly, warping
+from .elements import MERGE_FRACTION, Elements, make_elements
+from .embedding import SurfaceEmbedding
+from .integrals import Basis, make_basis, surface_points
+from .quadrature import VolumeRule, volume_rule
+
+MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means something else is wrong
+PIN_TOLERANCE = 1e-10  # a rigid mode is held when the Dirichlet patches see it with this share of its norm
+BALANCE_TOLERANCE = 1e-6
+COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per iteration
+COROTATED_MAX = 100
+
+
+@dataclass
+class Prescribed:
+    """Displacement ``value`` [3] (None: free component) or callable points [N, 3] -> [N, 3] [m] on
+    the surface inside ``region``; ``components`` says which are prescribed when value is callable."""
+
+    region: object
+    value: tuple | Callable
+    name: str
+    components: tuple[bool, ...] | None = None
+
+
+@dataclass
+class State:
+    """Solved coefficients u [E, 3, n] (element, component, basis) and the solve's report."""
+
+    u: np.ndarray
+    stats: SolveStats
+    seconds: float
+    rotations: np.ndarray | None = None
+
+
+@dataclass
+class DGElasticity:
+    """The DG method on one sliced geometry. ``loads`` are staggered-style ``SurfaceLoad`` objects
+    (traction / pressure / stress on the surface inside a region); body_force [3] or callable [N/m^3]."""
+
+    cut: CutCells
+    surface: Surface
+    material: Material
+    degree: int = 1
+    flux: str = "ip"
+    penalty: float = 20.0
+    prescribed: list[Prescribed] = field(default_factory=list)
+    surface_loads: list = field(default_factory=list)
+    body_force: np.ndarray | Callable | None = None
+    merge_fraction: float = MERGE_FRACTION
+    warnings: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.degree not in (1, 2):
+            raise VoxelasticError(f"method.degree: 1 or 2, got {self.degree}")
+        if self.flux not in ("ip", "bz"):
+            raise VoxelasticError(f"method.flux: 'ip' or 'bz', got {self.flux!r}")
+        if self.cut.degree < 2 * self.degree:
+            raise VoxelasticError(f"dg: degree {self.degree} needs moments of degree {2 * self.degree}, "
+                                  f"the slicing has {self.cut.degree}")
+        t = time.perf_counter()
+        self.timings: dict[str, float] = {}
+        self.elements: Elements = make_elements(self.cut, self.merge_fraction)
+        if self.elements.count == 0:
+            raise VoxelasticError("geometry: no material inside the grid")
+        self.warnings += self.elements.warnings
+        self.basis: Basis = make_basis(self.elements, self.degree)
+        self.n = self.basis.size
+        self.lam, self.mu = self.material.lame
+        self.timings["basis"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.element_blocks = assembly.element_blocks(self.elements, self.basis, self.mu, self.lam)
+        self.timings["element_blocks"] = time.perf_counter() - t
+        t = time.perf_counter()
+        self.patches = self._dirichlet_patches()
+        self.load_vector = self._loads()
+        self.timings["loads"] = time.perf_counter() - t
+        self.modes = self._free_modes()
+        self.eta = float(self.penalty)
+        self.dt: float | None = None
+        self.rotations: np.ndarray | None = None
+        self.warp_load = None
+        self._factor: Cholesky | None = None
+        self._build()
+
+    # ------------------------------------------------------------------ setup
+    @property
+    def size(self) -> int:
+        return self.elements.count * 3 * self.n
+
+    def _dirichlet_patches(self) -> dict:
+        """Surface patches of the displacement boundaries: one row per (boundary, element)."""
+        el = self.elements
+        tris, elem, patch, masks, values, names = [], [], [], [], [], []
+        count = 0
+        for k, bc in enumerate(self.prescribed):
+            clipped, source = bc.region.clip(el.boundary_triangles)
+            require_selection(len(clipped), "surface", bc.name)
+            owner = el.boundary_element[source]
+            uniq, local = np.unique(owner, return_inverse=True)
+            if callable(bc.value):
+                comp = np.asarray(bc.components if bc.components is not None else (True,) * 3, dtype=bool)
+            else:
+                comp = np.array([v is not None for v in bc.value], dtype=bool)
+            tris.append(clipped)
+            elem.append(owner)
+            patch.append(local + count)
+            masks.append(np.tile(comp.astype(float), (len(uniq), 1)))
+            values += [k] * len(uniq)
+            count += len(uniq)
+        if count == 0:
+            return {"count": 0}
+        return {"count": count, "triangles": np.concatenate(tris), "element": np.concatenate(elem),
+                "patch": np.concatenate(patch), "mask": np.concatenate(masks), "boundary": np.asarray(values)}
+
+    def _loads(self) -> np.ndarray:
+        """Consistent load vector [E, 3, n] [N] of body force and surface loads (unscaled)."""
+        from ..staggered.sampling import boundary_tractions  # noqa: F401  (same validation rules)
+
+        el, basis, n = self.elements, self.basis, self.n
+        f = np.zeros((el.count, 3, n))
+        if self.body_force is not None:
+            if callable(self.body_force):
+                rule = self.volume_rule()
+                b = np.asarray(self.body_force(rule.points), dtype=float).reshape(-1, 3)
+                psi = basis.values(rule.element, rule.xi)
+                np.add.at(f, rule.element, np.einsum("q,qp,qi->qpi", rule.weights, b, psi))
+            else:
+                g = np.asarray(self.body_force, dtype=float).reshape(3)
+                mean = basis.h**3 * np.einsum("eis,es->ei", basis.T, el.moments[:, :n])  # int psi_I dV
+                f += g[None, :, None] * mean[:, None, :]
+        for load in self.surface_loads:
+            clipped, source = load.region.clip(el.boundary_triangles)
+            require_selection(len(clipped), "surface", load.name)
+            sp_ = surface_points(clipped, el.boundary_element[source], self.degree + 3)
+            t = _tractions(load, sp_.points, sp_.normals)
+            psi = basis.values(sp_.element, self._xi(sp_.element, sp_.points))
+            np.add.at(f, sp_.element, np.einsum("q,qp,qi->qpi", sp_.weights, t, psi))
+        if not np.all(np.isfinite(f)):
+            raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
+        return f
+
+    def volume_rule(self) -> VolumeRule:
+        """Quadrature exact to degree 4 on every element (cached)."""
+        if getattr(self, "_rule", None) is None:
+            self._rule = volume_rule(self.elements)
+        return self._rule
+
+    def _xi(self, element: np.ndarray, points: np.ndarray) -> np.ndarray:
+        return (np.asarray(points) - self.elements.centres[element]) / self.basis.h
+
+    def _dirichlet_rhs(self, eta_b: np.ndarray, value_scale: float = 1.0, rotations: np.ndarray | None = None
+                       ) -> np.ndarray:
+        """Nitsche right-hand side [E, 3, n] for the prescribed values g (times value_scale):
+        -int (Pi g) . sigma(v) n + eta_b int C : (Pi g x n) : (Pi v x n). Warped (rotations [E, 3, 3]):
+        the consistency part sees g in the element's frame, R^T (x + g) - x, and its force is rotated back."""
+        el, basis, n = self.elements, self.basis, self.n
+        out = np.zeros((el.count, 3, n))
+        P = self.patches
+        if P["count"] == 0:
+            return out
+        sp_ = surface_points(P["triangles"], P["element"], 2 * self.degree + 2)
+        patch = P["patch"][sp_.triangle]
+        mask = P["mask"][patch]
+        g = np.zeros((len(sp_.points), 3))
+        for k, bc in enumerate(self.prescribed):
+            on = P["boundary"][patch] == k
+            if not np.any(on):
+                continue
+            if callable(bc.value):
+                g[on] = np.asarray(bc.value(sp_.points[on]), dtype=float).reshape(-1, 3)
+            else:
+                g[on] = np.array([0.0 if v is None else float(v) for v in bc.value])
+        if not np.all(np.isfinite(g)):
+            raise BoundaryError("boundaries: a prescribed displacement is not finite at some surface points")
+        g = value_scale * g * mask
+        gc = g
+        if rotations is not None:
+            x = sp_.points
+            gc = (np.einsum("qba,qb->qa", rotations[sp_.element], x + g) - x) * mask
+        nrm, w = sp_.normals, sp_.weights
+        psi = basis.values(sp_.element, self._xi(sp_.element, sp_.points))  # [Q, n]
+        grad = basis.gradients(sp_.element, self._xi(sp_.element, sp_.points))  # [Q, 3, n]
+        mu, lam = self.mu, self.lam
+        # g . sigma(psi_I e_p) n = mu (g_p d_n psi_I + n_p g . grad psi_I) + lam (g . n) d_p psi_I
+        dn = np.einsum("qa,qai->qi", nrm, grad)
+        gn_c = np.einsum("qa,qa->q", gc, nrm)
+        gdpsi = np.einsum("qa,qai->qi", gc, grad)
+        cons = (mu * (gc[:, :, None] * dn[:, None, :] + nrm[:, :, None] * gdpsi[:, None, :])
+                + lam * gn_c[:, None, None] * grad)  # [Q, p, I]
+        if self.flux != "ip":
+            cons = 0.0 * cons
+        elif rotations is not None:
+            cons = np.einsum("qps,qsi->qpi", rotations[sp_.element], cons)
+        gn = np.einsum("qa,qa->q", g, nrm)
+        pen = eta_b[patch][:, None, None] * mask[:, :, None] * (
+            mu * g[:, :, None] + (mu + lam) * (gn[:, None] * nrm)[:, :, None]) * psi[:, None, :]
+        np.add.at(out, sp_.element, w[:, None, None] * (pen - cons))
+        return out
+
+    def _free_modes(self) -> list:
+        """Per body, the rigid modes the Dirichlet patches leave free: (elements, basis [E_b*3*n, k])."""
+        el, basis, n = self.elements, self.basis, self.n
+        body = el.bodies()
+        P = self.patches
+        held = np.zeros((body.max() + 1, 6, 6))
+        centre = np.zeros((body.max() + 1, 3))
+        np.add.at(centre, body, el.centres * el.volume[:, None])
+        centre /= np.bincount(body, weights=el.volume)[:, None]
+        if P["count"]:
+            sp_ = surface_points(P["triangles"], P["element"], 2)
+            mask = P["mask"][P["patch"][sp_.triangle]]
+            b = body[sp_.element]
+            r = _rigid_fields(sp_.points - centre[b])  # [Q, 6, 3]
+            r = r * mask[:, None, :]
+            np.add.at(held, b, sp_.weights[:, None, None] * np.einsum("qmp,qlp->qml", r, r))
+        out = []
+        for label in np.unique(body):
+            members = np.nonzero(body == label)[0]
+            scale = np.bincount(body, weights=el.volume)[label] ** (1 / 3)
+            G = held[label]
+            # normalise rotations by the body's size so translations and rotations compare
+            S = np.diag([1, 1, 1, 1 / scale, 1 / scale, 1 / scale])
+            w, v = np.linalg.eigh(S @ G @ S)
+            loose = v[:, w < PIN_TOLERANCE * max(float(w.max(initial=0.0)), 1e-300) + (w.max(initial=0.0) == 0)]
+            if loose.shape[1] == 0:
+                continue
+            modes = self._mode_coefficients(members, centre[label], S @ loose)  # [members * 3 n, k]
+            q, _ = np.linalg.qr(modes)
+            out.append((members, q))
+        if out:
+            size = np.abs(self.load_vector).sum()
+            for members, q in out:
+                f = self.load_vector[members].reshape(-1)
+                if size > 0 and np.abs(q.T @ f).max() * np.sqrt(len(f)) > BALANCE_TOLERANCE * size:
+                    # work of the loads on a unit translation: the coefficients of 1 are L[:, 0, :]
+                    net = np.einsum("epi,ei->p", self.load_vector[members], basis.L[members][:, 0, :])
+                    raise UnbalancedLoadError(
+                        f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body of "
+                        f"{len(members)} element(s) free and its loads do not balance (net force "
+                        f"{np.round(net, 9).tolist()} N); add a displacement boundary on that body or balance the loads")
+            self.warnings.append(
+                f"{sum(q.shape[1] for _, q in out)} rigid-body mode(s) are not held by any displacement boundary; "
+                "the loads balance, so the solution is the one with no rigid motion (orthogonal to those modes)")
+        return out
+
+    def _mode_coefficients(self, members: np.ndarray, centre: np.ndarray, combos: np.ndarray) -> np.ndarray:
+        """Coefficients [len(members) * 3 n, k] of rigid motions sum_m combos[m, j] r_m (rotations about centre [3])."""
+        basis, h = self.basis, self.basis.h
+        c = self.elements.centres[members] - centre
+        L = basis.L[members]  # rows: monomials 1, xi_x, xi_y, xi_z in the basis
+        one = L[:, 0, :]
+        x = [c[:, a, None] * one + h * L[:, 1 + a, :] for a in range(3)]  # coefficients of x_a
+        zero = np.zeros_like(one)
+        fields = [[one, zero, zero], [zero, one, zero], [zero, zero, one],
+                  [-x[1], x[0], zero], [-x[2], zero, x[0]], [zero, -x[2], x[1]]]
+        cols = np.stack([np.stack(f, axis=1).reshape(-1) for f in fields], axis=1)  # [members*3*n, 6]
+        return cols @ combos
+
+    # ------------------------------------------------------------------ system
+    def _build(self) -> None:
+        """Assemble and factorise; double eta until an IP matrix is positive definite."""
+        for attempt in range(MAX_DOUBLINGS + 1):
+            t = time.perf_counter()
+            groups, eta_b = self._groups()
+            self.eta_b = eta_b
+            if self.rotations is not None:
+                groups, self.warp_load = warping.rotate(groups, self.rotations, warping.reference_state(self))
+            A = assembly.to_matrix(assembly.Blocks(np.concatenate([g.rows for g in groups]),
+                                                   np.concatenate([g.cols for g in groups]),
+                                                   np.concatenate([g.data for g in groups])), self.elements.count)
+            if self.dt is not None:
+                A = A + sp.identity(A.shape[0], format="csr") * (self.material.density * self.basis.h**3 / self.dt**2)
+            self.matrix = A
+            self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t
+            t = time.perf_counter()
+            try:
+                self._factor = self._factorise(A)
+                self.timings["factorisation"] = self.timings.get("factorisation", 0.0) + time.perf_counter() - t
+                break
+            except NotPositiveDefinite:
+                self.timings["factorisation"] = self.timings.get("factorisation", 0.0) + time.perf_counter() - t
+                if self.flux == "bz" and self.patches["count"] == 0:
+                    raise VoxelasticError("dg: the BZ matrix is not positive definite; the geometry is degenerate")
+                self.eta *= 2
+        else:
+            raise VoxelasticError(f"dg: the matrix is not positive definite even with penalty {self.eta:g}")
+        if self.eta != self.penalty and not any(w.startswith("the penalty was doubled") for w in self.warnings):
+            self.warnings.append(f"the penalty was doubled to {self.eta:g} (from {self.penalty:g}) until the matrix "
+                                 "was positive definite")
+        self._dirichlet_cache = None
+
+    def set_rotations(self, rotations: np.ndarray) -> None:
+        """Warp the operator by element rotations [E, 3, 3] (corotated model) and refactorise."""
+        self.rotations = rotations
+        self._build()
+
+    def _factorise(self, A: sp.csr_matrix) -> Cholesky:
+        if not self.modes:
+            return Cholesky(A)
+        # bordered with the free rigid modes Q: [[A, Q], [Q^T, 0]] has exactly k = Q.shape[1] negative
+        # pivots when A is positive definite on the complement of the modes, more when it is not
+        Q = self._mode_matrix()
+        K = sp.bmat([[A, sp.csr_matrix(Q)], [sp.csr_matrix(Q.T), None]], format="csr")
+        factor = Cholesky(K, definite=False)
+        if factor.negatives > Q.shape[1]:
+            raise NotPositiveDefinite(f"{factor.negatives - Q.shape[1]} negative pivots beyond the rigid modes")
+        return factor
+
+    def _mode_matrix(self) -> np.ndarray:
+        Q = np.zeros((self.size, sum(q.shape[1] for _, q in self.modes)))
+        col = 0
+        s = 3 * self.n
+        for members, q in self.modes:
+            rows = (members[:, None] * s + np.arange(s)[None, :]).reshape(-1)
+            Q[rows, col:col + q.shape[1]] = q
+            col += q.shape[1]
+        return Q
+
+    def _groups(self) -> tuple[list[assembly.Group], np.ndarray]:
+        """All blocks of the operator (element, interface, Nitsche) and the Nitsche penalties [b]."""
+        el, basis, mu, lam, eta = self.elements, self.basis, self.mu, self.lam, self.eta
+        E = el.count
+        warp = self.material.model == "corotated"
+        ip = 1.0 if self.flux == "ip" else 0.0
+        every = np.arange(E)
+        groups = [assembly.Group(every, every, self.element_blocks, every if warp else None)]
+
+        def faces(weights, owner) -> None:
+            b = assembly.face_blocks(el, basis, mu, lam, eta, weights)
+            groups.extend([assembly.Group(el.minus, el.minus, b[:, 0, 0], owner),
+                           assembly.Group(el.plus, el.plus, b[:, 1, 1], owner),
+                           assembly.Group(el.minus, el.plus, b[:, 0, 1], owner)])
+
+        if warp:
+            faces((1.0, 0.0, 0.0), None)
+            if ip:
+                faces((0.0, 1.0, 0.0), el.minus)
+                faces((0.0, 0.0, 1.0), el.plus)
+        else:
+            faces((1.0, ip, ip), None)
+        eta_b = np.zeros(0)
+        P = self.patches
+        if P["count"]:
+            owner = np.zeros(P["count"], dtype=np.int64)
+            owner[P["patch"]] = P["element"]
+            args = (el, basis, mu, lam, eta, P["triangles"], P["element"], P["patch"], P["mask"])
+            if warp:
+                pen, eta_b = assembly.nitsche_blocks(*args, weights=(1.0, 0.0))
+                groups.append(assembly.Group(owner, owner, pen))
+                if ip:
+                    cons, _ = assembly.nitsche_blocks(*args, weights=(0.0, 1.0))
+                    groups.append(assembly.Group(owner, owner, cons, owner))
+            else:
+                both, eta_b = assembly.nitsche_blocks(*args, weights=(1.0, ip))
+                groups.append(assembly.Group(owner, owner, both))
+        return groups, eta_b
+
+    # ------------------------------------------------------------------ solve
+    def set_time_step(self, dt: float | None) -> None:
+        """Backward Euler with step dt [s] adds M / dt^2 = rho h^3 / dt^2 I; None goes back to statics."""
+        if dt != self.dt:
+            self.dt = dt
+            self._build()
+
+    def solve(self, load_scale: float = 1.0, value_scale: float = 1.0, x0: np.ndarray | None = None,
+              inertia: np.ndarray | None = None, on_iteration: Callable[[int, float], None] | None = None) -> State:
+        """Coefficients minimising the energy with loads and prescribed values scaled; ``inertia``:
+        the predicted u^k + dt v^k [E, 3, n] of a backward-Euler step (after ``set_time_step``)."""
+        t0 = time.perf_counter()
+        if self.material.model == "corotated":
+            return warping.solve_corotated(self, load_scale, value_scale, inertia, on_iteration, t0)
+        u, residual = self._linear_solve(load_scale, value_scale, inertia)
+        if on_iteration is not None:
+            on_iteration(1, residual)
+        return State(u, SolveStats(1, residual, [residual]), time.perf_counter() - t0)
+
+    def _rhs(self, load_scale: float, value_scale: float, inertia: np.ndarray | None) -> np.ndarray:
+        if self.rotations is not None:  # the rotated prescribed values are not linear in their scale
+            b = load_scale * self.load_vector + self._dirichlet_rhs(self.eta_b, value_scale, self.rotations)
+            b = b + self.warp_load
+        else:
+            if self._dirichlet_cache is None:
+                self._dirichlet_cache = self._dirichlet_rhs(self.eta_b)
+            b = load_scale * self.load_vector + value_scale * self._dirichlet_cache
+        if inertia is not None and self.dt is not None:
+            b = b + self.material.density * self.basis.h**3 / self.dt**2 * inertia
+        return b.reshape(-1)
+
+    def _linear_solve(self, load_scale: float, value_scale: float, inertia) -> tuple[np.ndarray, float]:
+        b = self._rhs(load_scale, value_scale, inertia)
+        if self.modes:
+            k = sum(q.shape[1] for _, q in self.modes)
+            x = self._factor.solve(np.concatenate([b, np.zeros(k)]))[: self.size]
+        else:
+            x = self._factor.solve(b)
+        if not np.all(np.isfinite(x)):
+            raise VoxelasticError("dg: the solve produced non-finite values (singular system)")
+        r = self.matrix @ x - b
+        if self.modes:
+            Q = self._mode_matrix()
+            r = r - Q @ (Q.T @ r)
+        norm = np.linalg.norm(b)
+        residual = float(np.linalg.norm(r) / norm) if norm > 0 else float(np.linalg.norm(r))
+        return x.reshape(self.elements.count, 3, self.n), residual
+
+    # ------------------------------------------------------------------ fields
+    def evaluate(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement [N, 3] [m] of coefficients u [E, 3, n] at points [N, 3] of ``element`` [N]."""
+        psi = self.basis.values(element, self._xi(element, points))
+        return np.einsum("qpi,qi->qp", u[element], psi)
+
+    def gradient(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement gradient [N, 3, 3] (du_p / dx_a at [:, p, a]) at points of ``element``."""
+        grad = self.basis.gradients(element, self._xi(element, points))
+        return np.einsum("qpi,qai->qpa", u[element], grad)
+
+    def stress_at(self, u: np.ndarray, element: np.ndarray, points: np.ndarray,
+                  rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(strain, stress) Voigt [N, 6] (xx, yy, zz, yz, xz, xy; tensor strain) at points of ``element``;
+        with rotations [E, 3, 3] the corotated strain sym(R^T F) - I."""
+        G = self.gradient(u, element, points)
+        if rotations is not None:
+            F = np.eye(3) + G
+            G = np.einsum("qba,qbc->qac", rotations[element], F) - np.eye(3)
+        eps = 0.5 * (G + G.transpose(0, 2, 1))
+        voigt = np.stack([eps[:, 0, 0], eps[:, 1, 1], eps[:, 2, 2], eps[:, 1, 2], eps[:, 0, 2], eps[:, 0, 1]], axis=1)
+        from ..material import stress as hooke
+
+        return voigt, hooke(voigt, self.lam, self.mu, 3)
+
+    def cell_elements(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cells [C, 3], element [C]): every cell holding material and the element of its largest piece."""
+        cut, el = self.cut, self.elements
+        order = np.lexsort((-cut.volume, self.elements.grid.linear_index(cut.piece_cell)))
+        lin = self.elements.grid.linear_index(cut.piece_cell[order])
+        first = np.concatenate([[True], lin[1:] != lin[:-1]])
+        pick = order[first]
+        return cut.piece_cell[pick], el.piece_element[pick]
+
+    def locate(self, points: np.ndarray) -> np.ndarray:
+        """Element [N] containing each point, -1 outside the material. Among several pieces of one
+        cell the one owning the nearest surface triangle in that cell wins (exact: the segment from a
+        point to another piece of its cell leaves the solid through the point's own piece's surface)."""
+        from ..geometry.winding import inside
+
+        points = np.asarray(points, dtype=float)
+        grid, cut = self.elements.grid, self.cut
+        out = np.full(len(points), -1, dtype=np.int64)
+        cell = grid.cell_of(points)
+        ok = np.all((cell >= 0) & (cell < np.asarray(grid.shape)), axis=1)
+        if not np.any(ok):
+            return out
+        ok[ok] = inside(self.surface.vertices, self.surface.faces, points[ok])
+        lin_p = np.full(len(points), -1, dtype=np.int64)
+        lin_p[ok] = grid.linear_index(cell[ok])
+        lin_pieces = grid.linear_index(cut.piece_cell)
+        order = np.argsort(lin_pieces, kind="stable")
+        sorted_lin = lin_pieces[order]
+        lo = np.searchsorted(sorted_lin, lin_p, side="left")
+        hi = np.searchsorted(sorted_lin, lin_p, side="right")
+        for q in np.nonzero(ok & (hi > lo))[0]:
+            pieces = order[lo[q]:hi[q]]
+            if len(pieces) == 1:
+                out[q] = self.elements.piece_element[pieces[0]]
+                continue
+            out[q] = self.elements.piece_element[self._nearest_piece(points[q], pieces)]
+        return out
+
+    def _nearest_piece(self, p: np.ndarray, pieces: np.ndarray) -> int:
+        cut = self.cut
+        best, best_d = pieces[0], np.inf
+        for piece in pieces:
+            tris = cut.boundary_triangles[cut.boundary_piece == piece]
+            if len(tris):
+                d = _point_triangle_distance(p, tris).min()
+                if d < best_d:
+                    best, best_d = piece, d
+        return int(best)
+
+    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
+               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
+        grid = self.elements.grid
+        u = state.u
+        rot = state.rotations
+        cells, element = self.cell_elements()
+        centres = grid.sample_points(cells)
+        data = FieldData(time=time_value)
+        idx = tuple(cells.T)
+
+        def dense(values: np.ndarray) -> np.ndarray:
+            out = np.full(tuple(grid.shape) + values.shape[1:], np.nan)
+            out[idx] = values
+            return out
+
+        need_stress = any(n in names for n in ("strain", "stress", "von_mises"))
+        if "displacement" in names:
+            data.cells["displacement"] = dense(self.evaluate(u, element, centres))
+        if velocity is not None and "velocity" in names:
+            data.cells["velocity"] = dense(self.evaluate(velocity, element, centres))
+        if need_stress:
+            eps, sig = self.stress_at(u, element, centres, rot)
+            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3))):
+                if name in names:
+                    data.cells[name] = dense(val)
+        if probes is not None and len(probes):
+            probes = np.asarray(probes, dtype=float)
+            where = self.locate(probes)
+            ok = where >= 0
+            sel = where[ok]
+
+            def probe(values: np.ndarray, width: tuple) -> np.ndarray:
+                out = np.full((len(probes),) + width, np.nan)
+                out[ok] = values
+                return out
+
+            if "displacement" in names:
+                data.probes["displacement"] = probe(self.evaluate(u, sel, probes[ok]), (3,))
+            if velocity is not None and "velocity" in names:
+                data.probes["velocity"] = probe(self.evaluate(velocity, sel, probes[ok]), (3,))
+            if need_stress:
+                eps, sig = self.stress_at(u, sel, probes[ok], rot)
+                for name, val, width in (("strain", eps, (6,)), ("stress", sig, (6,)),
+                                         ("von_mises", von_mises(sig, 3), ())):
+                    if name in names:
+                        data.probes[name] = probe(val, width)
+        if surface:
+            data.surface["displacement"] = self.embedding().displacement(u)
+        return data
+
+    def embedding(self) -> SurfaceEmbedding:
+        if getattr(self, "_embedding", None) is None:
+            self._embedding = SurfaceEmbedding(self)
+        return self._embedding
+
+
+def _rigid_fields(x: np.ndarray) -> np.ndarray:
+    """Rigid modes [Q, 6, 3] at points x [Q, 3] (relative to a centre): 3 translations, then rotations
+    in the planes (x, y), (x, z), (y, z)."""
+    Q = len(x)
+    r = np.zeros((Q, 6, 3))
+    r[:, 0, 0] = r[:, 1, 1] = r[:, 2, 2] = 1.0
+    r[:, 3, 0], r[:, 3, 1] = -x[:, 1], x[:, 0]
+    r[:, 4, 0], r[:, 4, 2] = -x[:, 2], x[:, 0]
+    r[:, 5, 1], r[:, 5, 2] = -x[:, 2], x[:, 1]
+    return r
+
+
+def _tractions(load, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Traction [Q, 3] [Pa] of a surface load at points with unit outward normals."""
+    q = len(points)
+    if load.pressure is not None:
+        t = -float(load.pressure) * normals
+    elif load.stress is not None:
+        sigma = np.asarray(load.stress(points) if callable(load.stress) else load.stress, dtype=float)
+        sigma = np.broadcast_to(sigma, (q, 3, 3)) if sigma.shape == (3, 3) else sigma
+        t = np.einsum("qij,qj->qi", sigma, normals)
+    else:
+        t = np.asarray(load.traction(points) if callable(load.traction) else load.traction, dtype=float)
+        t = np.broadcast_to(t, (q, 3)) if t.shape == (3,) else t
+    if t.shape != (q, 3) or not np.all(np.isfinite(t)):
+        raise BoundaryError(f"{load.name}: the traction must be finite with 3 components at every surface point")
+    return np.array(t)
+
+
+def _point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Distances [T] from point p [3] to triangles [T, 3, 3] (Ericson's closest-point regions)."""
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("td,td->t", ab, ap), np.einsum("td,td->t", ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4 = np.einsum("td,td->t", ab, bp), np.einsum("td,td->t", ac, bp)
+    d5, d6 = np.einsum("td,td->t", ab, cp), np.einsum("td,td->t", ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    denom = va + vb + vc
+    denom = np.where(np.abs(denom) > 1e-300, denom, 1e-300)
+    v, w = vb / denom, vc / denom
+    closest = a + ab * v[:, None] + ac * w[:, None]
+    # vertex and edge regions
+    r = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6)]
+    closest = np.where(r[0][:, None], a, closest)
+    closest = np.where(r[1][:, None], b, closest)
+    closest = np.where(r[2][:, None], c, closest)
+    on_ab = (d1 * d4 - d3 * d2 <= 0) & (d1 >= 0) & (d3 <= 0) & ~(r[0] | r[1] | r[2])
+    t_ab = d1 / np.where(d1 - d3 != 0, d1 - d3, 1)
+    closest = np.where(on_ab[:, None], a + ab * t_ab[:, None], closest)
+    on_ac = (d5 * d2 - d1 * d6 <= 0) & (d2 >= 0) & (d6 <= 0) & ~(r[0] | r[1] | r[2])
+    t_ac = d2 / np.where(d2 - d6 != 0, d2 - d6, 1)
+    closest = np.where(on_ac[:, None], a + ac * t_ac[:, None], closest)
+    on_bc = (d3 * d6 - d5 * d4 <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0) & ~(r[0] | r[1] | r[2])
+    t_bc = (d4 - d3) / np.where((d4 - d3) + (d5 - d6) != 0, (d4 - d3) + (d5 - d6), 1)
+    closest = np.where(on_bc[:, None], b + (c - b) * t_bc[:, None], closest)
+    return np.linalg.norm(closest - p, axis=1)

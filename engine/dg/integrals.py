@@ -1,0 +1,157 @@
+"""Exact integrals of basis products over elements, interfaces and surface patches.
+
+Each integral is a coefficient sandwich around a Hankel matrix of moments (``basis``); moments
+come from the slicing (divergence theorem, exact up to round-off). Physical units: an element
+integral of psi_I psi_J is h^3 delta_IJ, derivatives carry 1/h, surface integrals h^2.
+Full cells and interfaces between two full cells share their reference values: they are
+computed once and broadcast.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.moments import area_terms, cell_moments, triangle_rule
+from . import basis as B
+from .elements import Elements
+
+
+@dataclass
+class Basis:
+    """Orthonormal bases of all elements: T [E, n, n] (rows = monomial coefficients), L = T^-1."""
+
+    degree: int
+    T: np.ndarray
+    L: np.ndarray
+    h: float
+
+    @property
+    def size(self) -> int:
+        return B.size(self.degree)
+
+    def values(self, element: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """psi_I at points xi [N, 3] (each in its element's frame) -> [N, n]."""
+        return np.einsum("ns,nis->ni", B.monomials(xi, self.degree), self.T[element])
+
+    def gradients(self, element: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """d psi_I / d x_a [1/m] at points xi [N, 3] -> [N, 3, n]."""
+        mono = B.monomials(xi, self.degree)
+        D = B.derivative(self.degree)  # [3, s, t]
+        return np.einsum("nt,ast,nis->nai", mono, D, self.T[element]) / self.h
+
+
+def make_basis(el: Elements, degree: int) -> Basis:
+    """Orthonormalise every element's monomials (full cells: one reference factorisation)."""
+    n = B.size(degree)
+    T = np.empty((el.count, n, n))
+    L = np.empty((el.count, n, n))
+    ref_T, ref_L = B.orthonormalise(cell_moments(2 * degree)[None, :], degree)
+    T[el.full], L[el.full] = ref_T[0], ref_L[0]
+    cut = ~el.full
+    if np.any(cut):
+        T[cut], L[cut] = B.orthonormalise(el.moments[cut], degree)
+    return Basis(degree, T, L, el.grid.spacing)
+
+
+def gradient_products(T: np.ndarray, H: np.ndarray, h: float, degree: int) -> np.ndarray:
+    """D[b, a, c, I, J] = int d_a psi_I d_c psi_J dV [m] for rows T [B, n, n] and Hankel H [B, n, n]."""
+    G = np.einsum("bis,ast->bait", T, B.derivative(degree))  # [B, 3, n, n] gradient coefficients
+    GH = np.einsum("bait,btu->baiu", G, H)
+    return h * np.einsum("baiu,bcju->bacij", GH, G)
+
+
+def element_gradients(el: Elements, basis: Basis) -> tuple[np.ndarray, np.ndarray]:
+    """(D_ref [1, 3, 3, n, n] shared by full cells, D_cut [C, 3, 3, n, n] for the others (order of ~full))."""
+    k = basis.degree
+    ref = np.nonzero(el.full)[0][:1]
+    H_ref = B.hankel(cell_moments(2 * k), k)[None]
+    T_ref = basis.T[ref] if len(ref) else B.orthonormalise(cell_moments(2 * k)[None, :], k)[0]
+    cut = ~el.full
+    return (gradient_products(T_ref, H_ref, basis.h, k),
+            gradient_products(basis.T[cut], B.hankel(el.moments[cut], k), basis.h, k))
+
+
+def face_products(el: Elements, basis: Basis, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Interface integrals of the faces ``faces`` [F']:
+
+    M[f, X, Y, I, J] = int_f psi^X_I psi^Y_J dA [m^2], N[f, X, Y, a, I, J] = int_f psi^X_I d_a psi^Y_J dA [m]
+    with sides X, Y in (minus, plus).
+    """
+    k, h = basis.degree, basis.h
+    sides = (el.minus[faces], el.plus[faces])
+    H = B.hankel(el.face_moments[faces], k)  # [F, n, n] in the face frame
+    A = []
+    for e in sides:
+        offset = (el.face_cell[faces] - el.cell[e]).astype(np.float64)  # face frame - element frame [cells]
+        A.append(np.einsum("fis,fst->fit", basis.T[e], B.shift(k, offset)))
+    D = B.derivative(k)
+    n = basis.size
+    M = np.empty((len(faces), 2, 2, n, n))
+    N = np.empty((len(faces), 2, 2, 3, n, n))
+    for X in range(2):
+        AH = np.einsum("fis,fst->fit", A[X], H)
+        for Y in range(2):
+            M[:, X, Y] = h**2 * np.einsum("fit,fjt->fij", AH, A[Y])
+            dY = np.einsum("fjs,ast->fajt", A[Y], D)
+            N[:, X, Y] = h * np.einsum("fit,fajt->faij", AH, dY)
+    return M, N
+
+
+@dataclass
+class SurfacePoints:
+    """Quadrature on surface triangles: points [Q, 3] [m], weights [Q] [m^2], unit outward
+    normals [Q, 3], element [Q], triangle [Q] (index into the triangles given)."""
+
+    points: np.ndarray
+    weights: np.ndarray
+    normals: np.ndarray
+    element: np.ndarray
+    triangle: np.ndarray
+
+
+def surface_points(triangles: np.ndarray, element: np.ndarray, degree: int) -> SurfacePoints:
+    """A rule exact to ``degree`` on every triangle [T, 3, 3] [m] (owned by ``element`` [T])."""
+    ref, w = triangle_rule(degree)
+    tri = np.asarray(triangles, dtype=np.float64)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    twice = np.linalg.norm(cross, axis=1)
+    normal = cross / np.where(twice > 0, twice, 1.0)[:, None]
+    bary = np.column_stack([1 - ref[:, 0] - ref[:, 1], ref])  # [q, 3]
+    pts = np.einsum("qk,tkd->tqd", bary, tri).reshape(-1, 3)
+    q = len(w)
+    return SurfacePoints(points=pts, weights=(twice[:, None] * w[None, :]).reshape(-1),
+                         normals=np.repeat(normal, q, axis=0), element=np.repeat(element, q),
+                         triangle=np.repeat(np.arange(len(tri)), q))
+
+
+def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: np.ndarray,
+                   patches: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact integrals over surface patches (triangles [T, 3, 3] [m] of ``element`` [T], grouped by
+    ``patches`` [T] in 0..count-1, one element per patch):
+
+    Mnn[b, a, c, I, J] = int psi_I psi_J n_a n_c dA [m^2], Nn[b, a, c, I, J] = int psi_I d_a psi_J n_c dA [m],
+    area [b] [m^2].
+    """
+    k, h = basis.degree, basis.h
+    n = basis.size
+    tri = np.asarray(triangles, dtype=np.float64)
+    corners = (tri - el.centres[element][:, None, :]) / h
+    moments = area_terms(corners, 2 * k)  # [T, m] in element frames, h^2 units
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
+    m1 = np.zeros((count, 3) + moments.shape[1:])
+    m2 = np.zeros((count, 3, 3) + moments.shape[1:])
+    np.add.at(m1, patches, normal[:, :, None] * moments[:, None, :])
+    np.add.at(m2, patches, normal[:, :, None, None] * normal[:, None, :, None] * moments[:, None, None, :])
+    area = np.zeros(count)
+    np.add.at(area, patches, 0.5 * np.linalg.norm(cross, axis=1))
+    owner = np.zeros(count, dtype=np.int64)
+    owner[patches] = element
+    T = basis.T[owner]
+    H1, H2 = B.hankel(m1, k), B.hankel(m2, k)  # [b, c, n, n], [b, a, c, n, n]
+    Mnn = h**2 * np.einsum("bis,bacst,bjt->bacij", T, H2, T)
+    G = np.einsum("bjs,ast->bajt", T, B.derivative(k))
+    Nn = h * np.einsum("bis,bcst,bajt->bacij", T, H1, G)
+    return Mnn, Nn, area

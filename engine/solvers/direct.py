@@ -1,0 +1,68 @@
+"""Sparse direct solves for symmetric systems: MKL PARDISO (pypardiso), SuperLU as the fallback.
+
+PARDISO factorises the upper triangle as a symmetric positive definite matrix (mtype 2); a
+zero or negative pivot means the matrix is not positive definite, which the DG method uses to
+raise its penalty (Kaufmann et al. 2009 section 9.1). Bordered (indefinite) systems use
+symmetric indefinite PARDISO (mtype -2). The choice of PARDISO over SuperLU and Taichi's
+SparseSolver is measured in docs/benchmarks.md (benchmarks/dg.py --solvers).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+try:  # MKL wheels exist for x86-64 only; elsewhere SuperLU does the work
+    import pypardiso
+except (ImportError, OSError):  # pragma: no cover - exercised only where MKL is missing
+    pypardiso = None
+
+
+class NotPositiveDefinite(Exception):
+    """The matrix handed to :class:`Cholesky` is not positive definite."""
+
+
+class Cholesky:
+    """Factorisation of a symmetric CSR matrix A [n, n]; ``solve(b)`` for b [n] or [n, k].
+
+    definite: A must be positive definite (raises NotPositiveDefinite when a pivot is not
+    positive); otherwise a symmetric indefinite factorisation whose ``negatives`` counts the
+    negative pivots (the inertia). ``backend`` names what ran.
+    """
+
+    def __init__(self, A: sp.spmatrix, *, definite: bool = True) -> None:
+        self.n = A.shape[0]
+        self.definite = definite
+        if pypardiso is not None:
+            self.backend = "pardiso"
+            self._solver = pypardiso.PyPardisoSolver(mtype=2 if definite else -2)
+            self._upper = sp.triu(A, format="csr")
+            self._upper.sort_indices()
+            try:
+                self._solver.factorize(self._upper)
+            except pypardiso.pardiso_wrapper.PyPardisoError as exc:
+                if definite and "-4" in str(exc):
+                    raise NotPositiveDefinite("zero or negative pivot") from None
+                raise
+            # inertia of an indefinite factorisation: pivots < 0 (iparm(23) in PARDISO's numbering)
+            self.negatives = int(self._solver.iparm[22]) if not definite else 0
+        else:  # pragma: no cover
+            self.backend = "superlu"
+            # symmetric mode, no pivoting off the diagonal: the pivots are those of L D L^T
+            self._lu = spla.splu(sp.csc_matrix(A), diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+            diag = self._lu.U.diagonal()
+            self.negatives = int(np.sum(diag < 0))
+            if definite and np.any(diag <= 0):
+                raise NotPositiveDefinite(f"{int(np.sum(diag <= 0))} non-positive pivots")
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        b = np.asarray(b, dtype=np.float64)
+        if self.backend == "pardiso":
+            return self._solver.solve(self._upper, b)
+        return self._lu.solve(b)  # pragma: no cover
+
+    def free(self) -> None:
+        """Release the factor's memory."""
+        if self.backend == "pardiso":
+            self._solver.free_memory(everything=True)
