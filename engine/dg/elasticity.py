@@ -330,7 +330,9 @@ class DGElasticity:
         # bordered with the free rigid modes Q: [[A, Q], [Q^T, 0]] has exactly k = Q.shape[1] negative
         # pivots when A is positive definite on the complement of the modes, more when it is not
         Q = self._mode_matrix()
-        K = sp.bmat([[A, sp.csr_matrix(Q)], [sp.csr_matrix(Q.T), None]], format="csr")
+        k = Q.shape[1]
+        zero = sp.csr_matrix((np.zeros(k), (np.arange(k), np.arange(k))), shape=(k, k))  # stored: PARDISO needs the diagonal
+        K = sp.bmat([[A, sp.csr_matrix(Q)], [sp.csr_matrix(Q.T), zero]], format="csr")
         factor = Cholesky(K, definite=False)
         if factor.negatives > Q.shape[1]:
             raise NotPositiveDefinite(f"{factor.negatives - Q.shape[1]} negative pivots beyond the rigid modes")
@@ -433,6 +435,19 @@ class DGElasticity:
         residual = float(np.linalg.norm(r) / norm) if norm > 0 else float(np.linalg.norm(r))
         return x.reshape(self.elements.count, 3, self.n), residual
 
+    def condition_estimate(self) -> float:
+        """2-norm condition number of the factorised matrix (Lanczos on A and on A^-1 through the
+        factor, 1e-3 relative accuracy); NaN when rigid modes are bordered out."""
+        import scipy.sparse.linalg as spla
+
+        if self.modes:
+            return float("nan")
+        n = self.matrix.shape[0]
+        top = spla.eigsh(self.matrix, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]
+        inverse = spla.LinearOperator((n, n), matvec=lambda v: self._factor.solve(np.asarray(v).ravel()), dtype=float)
+        bottom = 1.0 / spla.eigsh(inverse, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]
+        return float(top / bottom)
+
     # ------------------------------------------------------------------ fields
     def evaluate(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Displacement [N, 3] [m] of coefficients u [E, 3, n] at points [N, 3] of ``element`` [N]."""
@@ -468,44 +483,57 @@ class DGElasticity:
         return cut.piece_cell[pick], el.piece_element[pick]
 
     def locate(self, points: np.ndarray) -> np.ndarray:
-        """Element [N] containing each point, -1 outside the material. Among several pieces of one
-        cell the one owning the nearest surface triangle in that cell wins (exact: the segment from a
-        point to another piece of its cell leaves the solid through the point's own piece's surface)."""
+        """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
         from ..geometry.winding import inside
 
         points = np.asarray(points, dtype=float)
-        grid, cut = self.elements.grid, self.cut
         out = np.full(len(points), -1, dtype=np.int64)
-        cell = grid.cell_of(points)
-        ok = np.all((cell >= 0) & (cell < np.asarray(grid.shape)), axis=1)
-        if not np.any(ok):
-            return out
-        ok[ok] = inside(self.surface.vertices, self.surface.faces, points[ok])
-        lin_p = np.full(len(points), -1, dtype=np.int64)
-        lin_p[ok] = grid.linear_index(cell[ok])
+        ok = inside(self.surface.vertices, self.surface.faces, points) if len(points) else np.zeros(0, bool)
+        if np.any(ok):
+            out[ok] = self.owners(points[ok])
+        return out
+
+    def owners(self, points: np.ndarray) -> np.ndarray:
+        """Element [N] of points known to lie in the solid or on its surface, -1 where no cell around
+        holds a piece. A point on a cell face looks in the cells on both sides. Among several pieces the
+        one owning the nearest surface triangle wins (exact: the segment from a point to another piece
+        of its cell leaves the solid through the point's own piece's surface)."""
+        grid, cut = self.elements.grid, self.cut
+        h = grid.spacing
+        out = np.full(len(points), -1, dtype=np.int64)
+        shape = np.asarray(grid.shape)
         lin_pieces = grid.linear_index(cut.piece_cell)
         order = np.argsort(lin_pieces, kind="stable")
         sorted_lin = lin_pieces[order]
-        lo = np.searchsorted(sorted_lin, lin_p, side="left")
-        hi = np.searchsorted(sorted_lin, lin_p, side="right")
-        for q in np.nonzero(ok & (hi > lo))[0]:
-            pieces = order[lo[q]:hi[q]]
-            if len(pieces) == 1:
-                out[q] = self.elements.piece_element[pieces[0]]
+        tri_order = np.argsort(cut.boundary_piece, kind="stable")
+        tri_piece = cut.boundary_piece[tri_order]
+        rel = (np.asarray(points) - np.asarray(grid.origin)) / h
+        tol = 1e-9
+        for q, r in enumerate(rel):
+            lo, hi = np.floor(r - tol).astype(np.int64), np.floor(r + tol).astype(np.int64)
+            cand = []
+            for c in {tuple(np.where(np.array(bits, bool), hi, lo)) for bits in np.ndindex(2, 2, 2)}:
+                if np.all(np.array(c) >= 0) and np.all(np.array(c) < shape):
+                    k = int(np.ravel_multi_index(c, tuple(shape)))
+                    i, j = np.searchsorted(sorted_lin, k), np.searchsorted(sorted_lin, k, side="right")
+                    cand.extend(order[i:j].tolist())
+            if not cand:
                 continue
-            out[q] = self.elements.piece_element[self._nearest_piece(points[q], pieces)]
+            if len(cand) == 1:
+                out[q] = self.elements.piece_element[cand[0]]
+                continue
+            best, best_d = cand[0], np.inf
+            for piece in cand:
+                i, j = np.searchsorted(tri_piece, piece), np.searchsorted(tri_piece, piece, side="right")
+                if j > i:
+                    d = _point_triangle_distance(points[q], cut.boundary_triangles[tri_order[i:j]]).min()
+                    if d < best_d:
+                        best, best_d = piece, d
+                elif best_d == np.inf:
+                    best = piece  # an interior (full) piece: the point is inside it unless a surface is nearer
+                    best_d = np.inf
+            out[q] = self.elements.piece_element[best]
         return out
-
-    def _nearest_piece(self, p: np.ndarray, pieces: np.ndarray) -> int:
-        cut = self.cut
-        best, best_d = pieces[0], np.inf
-        for piece in pieces:
-            tris = cut.boundary_triangles[cut.boundary_piece == piece]
-            if len(tris):
-                d = _point_triangle_distance(p, tris).min()
-                if d < best_d:
-                    best, best_d = piece, d
-        return int(best)
 
     def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
                time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:

@@ -104,43 +104,12 @@ class SurfaceEmbedding:
 
 
 def _vertex_elements(method, vertices: np.ndarray) -> np.ndarray:
-    """The element [V] whose piece's surface holds each vertex (nearest surface triangle of its cell's
-    pieces; a vertex outside every piece, e.g. beyond the grid, takes the nearest element centre)."""
-    el, cut, grid = method.elements, method.cut, method.elements.grid
-    out = np.full(len(vertices), -1, dtype=np.int64)
-    # vertices on a cell boundary belong to either cell: try the cell of the vertex and its lower neighbours
-    lin_pieces = grid.linear_index(np.clip(cut.piece_cell, 0, np.asarray(grid.shape) - 1))
-    by_cell: dict[int, list[int]] = {}
-    for p, k in enumerate(lin_pieces):
-        by_cell.setdefault(int(k), []).append(p)
-    tri_by_piece: dict[int, np.ndarray] = {}
-    order = np.argsort(cut.boundary_piece, kind="stable")
-    bp = cut.boundary_piece[order]
-    starts = np.searchsorted(bp, np.arange(cut.num_pieces))
-    ends = np.searchsorted(bp, np.arange(cut.num_pieces), side="right")
-    from .elasticity import _point_triangle_distance
+    """The element [V] whose piece's surface holds each vertex; a vertex outside the grid's pieces
+    takes the element with the nearest centre."""
+    out = method.owners(vertices)
+    missing = np.nonzero(out < 0)[0]
+    if len(missing):
+        from scipy.spatial import cKDTree
 
-    base = grid.cell_of(vertices)
-    offsets = np.array([[i, j, k] for i in (0, -1) for j in (0, -1) for k in (0, -1)])
-    shape = np.asarray(grid.shape)
-    for v, x in enumerate(vertices):
-        best, best_d = -1, np.inf
-        for o in offsets:
-            c = base[v] + o
-            if np.any(c < 0) or np.any(c >= shape):
-                continue
-            for p in by_cell.get(int(grid.linear_index(c[None])[0]), []):
-                if p not in tri_by_piece:
-                    tri_by_piece[p] = cut.boundary_triangles[order[starts[p]:ends[p]]]
-                tris = tri_by_piece[p]
-                if len(tris):
-                    d = _point_triangle_distance(x, tris).min()
-                    if d < best_d:
-                        best, best_d = p, d
-        out[v] = el.piece_element[best] if best >= 0 else -1
-    missing = out < 0
-    if np.any(missing):
-        c = el.centres
-        for v in np.nonzero(missing)[0]:
-            out[v] = int(np.argmin(np.linalg.norm(c - vertices[v], axis=1)))
+        out[missing] = cKDTree(method.elements.centres).query(vertices[missing])[1]
     return out
