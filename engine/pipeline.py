@@ -1,9 +1,8 @@
 """Job spec + mesh -> geometry -> grid -> cut-cell geometry -> (discretization -> solve) -> Result.
 
 The same function serves the CLI, the Python API (``engine.simulate``) and the service workers.
-Stages report through ``progress(stage, fraction, info)``. The staggered method runs end to end;
-for a method that has not landed (DG) ``run`` performs the geometry stages and then raises
-``MethodUnavailableError``: it never fakes a field.
+Stages report through ``progress(stage, fraction, info)``. Both methods (staggered, DG) run end to
+end through the shared analysis drivers.
 """
 
 from __future__ import annotations
@@ -19,7 +18,6 @@ import numpy as np
 
 from schemas import JobSpec, parse_job
 
-from . import __version__
 from .errors import GeometryError, GridError, MethodUnavailableError
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.fractions import VolumeFractions, control_offsets, volume_fractions
@@ -264,9 +262,3 @@ def _discretize(spec: JobSpec, geo: Geometry, functions: Functions):
     from .staggered.problem import make_staggered
 
     return make_staggered(spec, geo, functions)
-
-
-def _solid_volume(geo: Geometry) -> float:
-    if geo.fractions is not None:
-        return geo.fractions.solid_volume()
-    return float(np.sum(geo.cut_cells.volume))
