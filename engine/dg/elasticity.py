@@ -144,8 +144,6 @@ class DGElasticity:
 
     def _loads(self) -> np.ndarray:
         """Consistent load vector [E, 3, n] [N] of body force and surface loads (unscaled)."""
-        from ..staggered.sampling import boundary_tractions  # noqa: F401  (same validation rules)
-
         el, basis, n = self.elements, self.basis, self.n
         f = np.zeros((el.count, 3, n))
         if self.body_force is not None:
