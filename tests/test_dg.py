@@ -206,9 +206,7 @@ def test_parallel_plates_sharing_cells_stay_apart():
     s = surface_of(trimesh.util.concatenate([a, b]))
     grid = Grid(origin=(-h, -h, -h), spacing=h, shape=(10, 6, 8))
     cut = slice_cells(s, grid)
-    shared = np.intersect1d(cut.piece_cell[cut.piece_cell[:, 2] == 1][:, :2].view("i8,i8"),
-                            cut.piece_cell[cut.piece_cell[:, 2] == 1][:, :2].view("i8,i8"))
-    assert len(shared) > 0 and len(np.unique(cut.piece_cell, axis=0)) < cut.num_pieces  # cells holding both plates
+    assert len(np.unique(cut.piece_cell, axis=0)) < cut.num_pieces  # some cells hold a piece of each plate
     lower = box_region([-1, -1, -1], [2.5, 2, 0.6 * h])
     clamp = box_region([-1, -1, -1], [1e-9, 2, 2])
     m = DGElasticity(cut=cut, surface=s, material=MAT, degree=1, flux="ip", penalty=10,
