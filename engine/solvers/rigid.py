@@ -50,19 +50,23 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
     """
     out = []
     d = points.shape[1]
-    for label in np.unique(body):
-        on = body == label
+    labels = np.nonzero(np.bincount(body))[0] if len(body) and body.min() >= 0 else np.unique(body)
+    for label in labels:
+        # one body (the usual case) is every DOF: no masked copies of [n, d] arrays (the 256^3
+        # shell has 20 M DOFs, and this ran for seconds)
+        on = slice(None) if len(labels) == 1 else np.nonzero(body == label)[0]
         center = points[on].mean(axis=0)
         # unit columns over the whole body, but only the pinned rows built: a clamped body (the
         # usual case) stops here, without an [n, modes] array over all its DOFs
-        norms = _mode_norms(points[on] - center, axis[on], d)
-        pinned = rigid_modes(points[on & fixed], axis[on & fixed], center) / norms
+        norms = _mode_norms(points[on], center, axis[on], d)
+        pins = np.nonzero(fixed[on])[0]
+        pinned = rigid_modes(points[on][pins], axis[on][pins], center) / norms
         gram = pinned.T @ pinned
         w, v = np.linalg.eigh(gram)
         loose = v[:, w < PIN_TOLERANCE * max(1.0, float(w.max(initial=0.0)))]
         if loose.shape[1] == 0:
             continue
-        free_dofs = np.nonzero(on & ~fixed)[0]
+        free_dofs = np.arange(len(body))[on][~fixed[on]]
         # the modes can be dependent on few DOFs (a rotation vanishes at a lone cell's faces): keep
         # only the directions they really span
         free_part = rigid_modes(points[free_dofs], axis[free_dofs], center) / norms
@@ -73,12 +77,15 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
     return out
 
 
-def _mode_norms(x: np.ndarray, axis: np.ndarray, d: int) -> np.ndarray:
-    """Euclidean norms [m] of the columns of ``rigid_modes`` about the centroid (x: points minus
-    the centroid), without building them; 1 for a column that vanishes."""
-    squares = [float(np.count_nonzero(axis == k)) for k in range(d)]
+def _mode_norms(points: np.ndarray, center: np.ndarray, axis: np.ndarray, d: int) -> np.ndarray:
+    """Euclidean norms [m] of the columns of ``rigid_modes`` about ``center`` (the centroid of
+    ``points``), without building them; 1 for a column that vanishes."""
+    squares = np.bincount(axis, minlength=d)[:d].astype(float).tolist()
+    # sums over the DOFs of each component of each squared coordinate: [component, coordinate]
+    moments = np.stack([np.bincount(axis, weights=(points[:, l] - center[l]) ** 2, minlength=d)[:d]
+                        for l in range(d)], axis=1)
     for k, l in itertools.combinations(range(d), 2):
-        squares.append(float(np.sum(x[axis == k, l] ** 2) + np.sum(x[axis == l, k] ** 2)))
+        squares.append(float(moments[k, l] + moments[l, k]))
     norms = np.sqrt(np.asarray(squares))
     return np.where(norms > 0, norms, 1.0)
 

@@ -7,8 +7,15 @@ tile, which no kernel writes). ``full`` [nt] flags tiles whose cell and edge fra
 they take the constant-coefficient path and read no fractions.
 
 The operator is applied in two passes: the weighted stresses at cells and edges, then their
-discrete divergence at the faces (each a gather, so there are no atomics and no races).
+discrete divergence at the faces (each a gather, so there are no atomics and no races). Both
+passes run either over every kept position or over a sorted list of flat positions (a *part*:
+the multigrid's boundary band is a few DOFs thick, far thinner than its tiles).
+
+Arithmetic is f64 whatever the arrays hold; stores go through :func:`stored`, so one kernel
+serves f64 and f32 arrays (``solver.precision`` f32) without a precision warning per store.
 """
+
+import itertools
 
 import taichi as ti
 
@@ -20,6 +27,23 @@ PAIRS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}
 @ti.func
 def unit(d: ti.template(), a: ti.template()):
     return ti.Vector([1 if k == a else 0 for k in range(d)], dt=ti.i32)
+
+
+@ti.func
+def stored(y: ti.template(), v):
+    """v in the element type of array y: an f32 array takes f64 results without Taichi's
+    precision warning at every store."""
+    return ti.cast(v, y.get_type().element_type)
+
+
+@ti.func
+def position(listed: ti.template(), pos: ti.types.ndarray(), i: ti.i32) -> ti.i32:
+    """The i-th flat position of a part: ``pos[i]`` for a listed part, else i itself (every kept
+    position in order)."""
+    p = i
+    if ti.static(listed):
+        p = pos[i]
+    return p
 
 
 @ti.func
@@ -58,67 +82,105 @@ def local_coords(d: ti.template(), l: ti.i32):
 
 
 @ti.func
-def near(d: ti.template(), nbr: ti.types.ndarray(), t: ti.i32, c, o) -> ti.i32:
-    """Flat position of local coordinates c + o (|o_k| < B) of tile t, through the table of the
-    3^d neighbouring tiles (the zero tile where one is not kept): no bounds checks, no tile map."""
-    code = 0
-    l = 0
+def face_neighbours(d: ti.template(), nbr: ti.types.ndarray(), t: ti.i32, p: ti.i32, c):
+    """Flat positions of p + e_k and p - e_k for every axis k (two d-vectors), p being local
+    coordinates c of tile t: within the tile a fixed stride, across its side through ``nbr``.
+    Computed once per position before any store: per-access lookups (``near``) were repeated
+    for every read, and the compiler could not merge them across the stores (20-25% slower)."""
+    up = ti.Vector([0] * d, dt=ti.i32)
+    down = ti.Vector([0] * d, dt=ti.i32)
     for k in ti.static(range(d)):
-        ck = c[k] + o[k]
-        code = code * 3 + ((ck + B) >> BITS)
-        l = l * B + (ck & (B - 1))
-    return nbr[t, code] * (B**d) + l
+        stride = ti.static(B ** (d - 1 - k))
+        up[k] = p + stride
+        if c[k] == B - 1:
+            up[k] = nbr[t, ti.static((3**d - 1) // 2 + 3 ** (d - 1 - k))] * (B**d) + (p & (B**d - 1)) - (B - 1) * stride
+        down[k] = p - stride
+        if c[k] == 0:
+            down[k] = nbr[t, ti.static((3**d - 1) // 2 - 3 ** (d - 1 - k))] * (B**d) + (p & (B**d - 1)) + (B - 1) * stride
+    return up, down
 
 
 @ti.kernel
-def weighted_stresses(d: ti.template(), tiles: ti.types.ndarray(), nbr: ti.types.ndarray(), full: ti.types.ndarray(),
-                      u: ti.types.ndarray(), vc: ti.types.ndarray(), ve: ti.types.ndarray(),
-                      lam: float, mu: float, inv_h: float, sc: ti.types.ndarray(), se: ti.types.ndarray()):
+def weighted_stresses(d: ti.template(), listed: ti.template(), pos: ti.types.ndarray(), n: ti.i32,
+                      nbr: ti.types.ndarray(), full: ti.types.ndarray(), u: ti.types.ndarray(),
+                      vc: ti.types.ndarray(), ve: ti.types.ndarray(), lam: float, mu: float, inv_h: float,
+                      sc: ti.types.ndarray(), se: ti.types.ndarray()):
     """sc[a] = Vc (2 mu eps_aa + lam tr eps) at cells; se[q] = Ve 2 mu eps_ab at edges of pair q,
-    in the tiles ``tiles`` [m]."""
-    for i, l in ti.ndrange(tiles.shape[0], B**d):
-        t = tiles[i]
-        c = local_coords(d, l)
-        p = t * (B**d) + l
+    at the n positions of a part (see :func:`position`)."""
+    for i in range(n):
+        p = position(listed, pos, i)
+        t = p >> (BITS * d)
+        up, down = face_neighbours(d, nbr, t, p, local_coords(d, p & (B**d - 1)))
+        here = ti.Vector([0.0] * d)
+        for a in ti.static(range(d)):
+            here[a] = u[a, p]
         eps = ti.Vector([0.0] * d)
         for a in ti.static(range(d)):
-            eps[a] = (u[a, near(d, nbr, t, c, unit(d, a))] - u[a, p]) * inv_h
+            eps[a] = (u[a, up[a]] - here[a]) * inv_h
+        g = ti.Vector([0.0] * ti.static(len(PAIRS[d])))
+        for q in ti.static(range(len(PAIRS[d]))):
+            a, b = ti.static(PAIRS[d][q])
+            g[q] = (here[a] - u[a, down[b]] + here[b] - u[b, down[a]]) * inv_h
         w = 1.0
         if full[t] == 0:
             w = vc[p]
         tr = eps.sum()
         for a in ti.static(range(d)):
-            sc[a, p] = w * (2.0 * mu * eps[a] + lam * tr)
+            sc[a, p] = stored(sc, w * (2.0 * mu * eps[a] + lam * tr))
         for q in ti.static(range(len(PAIRS[d]))):
-            a, b = ti.static(PAIRS[d][q])
-            g = (u[a, p] - u[a, near(d, nbr, t, c, -unit(d, b))]
-                 + u[b, p] - u[b, near(d, nbr, t, c, -unit(d, a))]) * inv_h
             wq = 1.0
             if full[t] == 0:
                 wq = ve[q, p]
-            se[q, p] = wq * mu * g
+            se[q, p] = stored(se, wq * mu * g[q])
+
+
+# What stress_divergence does with A x at a face (compile-time modes).
+APPLY, RESIDUAL, CHEBYSHEV, PRECONDITIONED = 0, 1, 2, 3
 
 
 @ti.kernel
-def stress_divergence(d: ti.template(), tiles: ti.types.ndarray(), nbr: ti.types.ndarray(), mask: ti.types.ndarray(),
-                      sc: ti.types.ndarray(), se: ti.types.ndarray(), scale: float, x: ti.types.ndarray(),
-                      m: ti.types.ndarray(), shift: float, y: ti.types.ndarray()):
-    """y = mask (h^{d-1} div(weighted stresses) + shift m x): the operator K (+ shift M) at the
-    faces of the tiles ``tiles`` (whose stresses and their neighbours' must be current)."""
-    for i, l in ti.ndrange(tiles.shape[0], B**d):
-        t = tiles[i]
-        c = local_coords(d, l)
-        p = t * (B**d) + l
+def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template(), pos: ti.types.ndarray(),
+                      n: ti.i32, nbr: ti.types.ndarray(), mask: ti.types.ndarray(), sc: ti.types.ndarray(),
+                      se: ti.types.ndarray(), scale: float, x: ti.types.ndarray(), m: ti.types.ndarray(),
+                      shift: float, b: ti.types.ndarray(), dinv: ti.types.ndarray(), step: ti.types.ndarray(),
+                      c1: float, c2: float, y: ti.types.ndarray()):
+    """A x = mask (h^{d-1} div(weighted stresses) + shift m x), the operator K (+ shift M), at the
+    faces of the n positions of a part (whose stresses and their neighbours' must be current).
+    ``mode``: APPLY y = A x; RESIDUAL y = b - A x; CHEBYSHEV step = c1 step + c2 dinv (b - A x),
+    x += step (one step of the Chebyshev recurrence; c1 = 0 never reads step); PRECONDITIONED
+    y = c2 dinv A x (a power-iteration step; y may be x). Fusing these into the divergence saves
+    writing and re-reading A x, and x is only read at the face itself (the stresses were computed
+    before), so updating it in place is safe. Arrays a mode does not use may be any array of the
+    right rank."""
+    for i in range(n):
+        p = position(listed, pos, i)
+        t = p >> (BITS * d)
+        up, down = face_neighbours(d, nbr, t, p, local_coords(d, p & (B**d - 1)))
+        div = ti.Vector([0.0] * d)
         for a in ti.static(range(d)):
-            f = sc[a, near(d, nbr, t, c, -unit(d, a))] - sc[a, p]
-            for q in ti.static(range(len(PAIRS[d]))):
-                qa, qb = ti.static(PAIRS[d][q])
-                if ti.static(qa == a or qb == a):
-                    b = ti.static(qb if qa == a else qa)
-                    f += se[q, p] - se[q, near(d, nbr, t, c, unit(d, b))]
+            div[a] = sc[a, down[a]] - sc[a, p]
+        for q in ti.static(range(len(PAIRS[d]))):
+            qa, qb = ti.static(PAIRS[d][q])
+            here = se[q, p]
+            div[qa] += here - se[q, up[qb]]
+            div[qb] += here - se[q, up[qa]]
+        for a in ti.static(range(d)):
+            f = div[a]
             if shift != 0.0:  # uniform branch: statics never read the mass and x here
                 f += shift * m[a, p] * x[a, p] / scale
-            y[a, p] = mask[a, p] * scale * f
+            if ti.static(mode == APPLY):
+                y[a, p] = stored(y, mask[a, p] * scale * f)
+            elif ti.static(mode == RESIDUAL):
+                y[a, p] = stored(y, b[a, p] - mask[a, p] * scale * f)
+            elif ti.static(mode == PRECONDITIONED):
+                y[a, p] = stored(y, c2 * dinv[a, p] * scale * f)
+            else:
+                # dinv vanishes off the unknowns, so the mask is not needed: step stays 0 there
+                s = c2 * dinv[a, p] * (b[a, p] - scale * f)
+                if c1 != 0.0:
+                    s += c1 * step[a, p]
+                step[a, p] = stored(step, s)
+                x[a, p] = stored(x, x[a, p] + s)
 
 
 @ti.kernel
@@ -139,9 +201,10 @@ def inverse_diagonal(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.type
                     b = ti.static(qb if qa == a else qa)
                     g += mu * (ve[q, p] + ve[q, address(d, tmap, I + unit(d, b), nt)])
             diag = scale * g + shift * m[a, p]
-            dinv[a, p] = 0.0
+            inv = 0.0
             if mask[a, p] != 0 and diag > 0:
-                dinv[a, p] = 1.0 / diag
+                inv = 1.0 / diag
+            dinv[a, p] = stored(dinv, inv)
 
 
 @ti.kernel
@@ -175,27 +238,6 @@ def prune_edges(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.nda
 
 
 @ti.kernel
-def boundary_band(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(), vc: ti.types.ndarray(),
-                  fixed: ti.types.ndarray(), band: ti.types.ndarray()):
-    """band[p] = 1 where a cut cell (0 < vc < 1) or a prescribed DOF (``fixed`` [size]) lies in the
-    3^d block around position p."""
-    nt = coords.shape[0]
-    for t, l in ti.ndrange(nt, B**d):
-        I = index_of(d, coords, t, l)
-        hit = 0
-        for s in range(3**d):
-            o = ti.Vector([0] * d, dt=ti.i32)
-            code = s
-            for k in ti.static(range(d)):
-                o[d - 1 - k] = code % 3 - 1
-                code //= 3
-            q = address(d, tmap, I + o, nt)
-            if (vc[q] > 0 and vc[q] < 1) or fixed[q] != 0:
-                hit = 1
-        band[t * (B**d) + l] = hit
-
-
-@ti.kernel
 def coarse_fractions(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
                      fine_tmap: ti.types.ndarray(), fine_zero: ti.i32, fine_vc: ti.types.ndarray(),
                      vc: ti.types.ndarray(), ve: ti.types.ndarray(), vf: ti.types.ndarray()):
@@ -210,20 +252,20 @@ def coarse_fractions(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.type
         for s in range(2**d):
             o = ti.Vector([(s >> k) & 1 for k in ti.static(range(d))], dt=ti.i32)
             c += fine_vc[address(d, fine_tmap, 2 * J - 2 + o, fine_zero)]
-        vc[p] = c / 2**d
+        vc[p] = stored(vc, c / 2**d)
         for a in ti.static(range(d)):
             f = 0.0
             for s in range(2**d):
                 o = ti.Vector([(s >> k) & 1 for k in ti.static(range(d))], dt=ti.i32)
                 f += fine_vc[address(d, fine_tmap, 2 * J - 2 - unit(d, a) + o, fine_zero)]
-            vf[a, p] = f / 2**d
+            vf[a, p] = stored(vf, f / 2**d)
         for q in ti.static(range(len(PAIRS[d]))):
             a, b = ti.static(PAIRS[d][q])
             e = 0.0
             for s in range(2**d):
                 o = ti.Vector([(s >> k) & 1 for k in ti.static(range(d))], dt=ti.i32)
                 e += fine_vc[address(d, fine_tmap, 2 * J - 2 - unit(d, a) - unit(d, b) + o, fine_zero)]
-            ve[q, p] = e / 2**d
+            ve[q, p] = stored(ve, e / 2**d)
 
 
 @ti.func
@@ -270,10 +312,10 @@ def prolong_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.
         p = t * (B**d) + l
         for a in ti.static(range(d)):
             v = 0.0
-            for corner in range(2**d):
+            for corner in ti.static(range(2**d)):  # unrolled: 25% faster than a runtime loop
                 J, w = prolongation_weights(d, a, I + 2, corner)
                 v += w * coarse[a, parent_address(d, parents, coords, t, J)]
-            x[a, p] = x[a, p] + mask[a, p] * v  # a plain store: no atomic, each p has one writer
+            x[a, p] = stored(x, x[a, p] + mask[a, p] * v)  # a plain store: no atomic, each p has one writer
 
 
 @ti.kernel
@@ -295,26 +337,81 @@ def restrict_add(d: ti.template(), dtype: ti.template(), coords: ti.types.ndarra
                         ti.atomic_add(out[a, q], ti.cast(w * r, dtype))
 
 
+def _offsets(d: int, a: int) -> list[tuple[int, ...]]:
+    """Offsets g (per axis, of fine I = 2 J - 3 + g) of the fine DOFs that coarse DOF J of
+    component a collects, axes 1..d-1: g in {0, 1, 2} along the component's axis, {0..3} across."""
+    return list(itertools.product(*[range(3 if k == a else 4) for k in range(1, d)]))
+
+
+def _restriction_weight(a: int, g: tuple[int, ...]) -> float:
+    """Interpolation weight of the fine DOF at offsets g (one per axis, see :func:`restrict`) for
+    component a: the product of 1/2, 1, 1/2 along the component's axis, 1/4, 3/4, 3/4, 1/4 across."""
+    w = 1.0
+    for k, gk in enumerate(g):
+        w *= (1.0 if gk == 1 else 0.5) if k == a else (0.75 if gk in (1, 2) else 0.25)
+    return w
+
+
 @ti.kernel
-def jacobi_update(d: ti.template(), x: ti.types.ndarray(), dinv: ti.types.ndarray(), b: ti.types.ndarray(),
-                  y: ti.types.ndarray(), omega: float):
-    """x += omega D^-1 (b - y) where y = A x."""
+def restrict(d: ti.template(), coords: ti.types.ndarray(), children: ti.types.ndarray(), mask: ti.types.ndarray(),
+             fine: ti.types.ndarray(), out: ti.types.ndarray()):
+    """out = mask P^T fine at every kept coarse position (``coords`` the coarse tiles; ``children``
+    [nt, 3^d] the fine tiles around 2 T, see ``TileLayout.children``). A gather with the weights of
+    :func:`prolongation_weights` read backwards: coarse J collects fine I + 2 = 2 J + o with o in
+    {-1, 0, 1} (weights 1/2, 1, 1/2) along the component's axis and o in {-1, 0, 1, 2} (1/4, 3/4,
+    3/4, 1/4) across it. The scatter (:func:`restrict_add`) needs an atomic per fine DOF and
+    corner and was as slow as an operator apply; this is 4-5x faster. The per-axis address parts
+    are computed once per position; the taps are unrolled over the static offsets (a runtime loop
+    over them was 4x slower: the address parts were recomputed in it)."""
+    for t, l in ti.ndrange(coords.shape[0], B**d):
+        J = index_of(d, coords, t, l)
+        p = t * (B**d) + l
+        # per axis k and offset g: the tile-code and local parts of the fine address
+        codes = ti.Matrix([[0] * 4 for _ in ti.static(range(d))], dt=ti.i32)
+        locs = ti.Matrix([[0] * 4 for _ in ti.static(range(d))], dt=ti.i32)
+        for k in ti.static(range(d)):
+            for g in ti.static(range(4)):
+                I = 2 * J[k] - 3 + g
+                codes[k, g] = ((I >> BITS) - 2 * coords[t, k] + 1) * (3 ** (d - 1 - k))
+                locs[k, g] = (I & (B - 1)) * (B ** (d - 1 - k))
+        for a in ti.static(range(d)):
+            v = 0.0
+            for g0 in ti.static(range(3 if a == 0 else 4)):
+                for rest in ti.static(_offsets(d, a)):
+                    code = codes[0, g0]
+                    loc = locs[0, g0]
+                    for k in ti.static(range(1, d)):
+                        code += codes[k, rest[k - 1]]
+                        loc += locs[k, rest[k - 1]]
+                    w = ti.static(_restriction_weight(a, (g0,) + rest))
+                    v += w * fine[a, children[t, code] * (B**d) + loc]
+            out[a, p] = stored(out, mask[a, p] * v)
+
+
+@ti.kernel
+def chebyshev_start(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.types.ndarray(),
+                    b: ti.types.ndarray(), c: float):
+    """step = x = c D^-1 b: the first Chebyshev step from x = 0 (needs no A x)."""
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            x[a, p] = x[a, p] + omega * dinv[a, p] * (b[a, p] - y[a, p])
+            s = c * dinv[a, p] * b[a, p]
+            step[a, p] = stored(step, s)
+            x[a, p] = stored(x, s)
 
 
 @ti.kernel
-def chebyshev_step(d: ti.template(), tiles: ti.types.ndarray(), x: ti.types.ndarray(), step: ti.types.ndarray(),
-                   dinv: ti.types.ndarray(), b: ti.types.ndarray(), y: ti.types.ndarray(), c1: float, c2: float):
-    """step = c1 step + c2 D^-1 (b - y); x += step (one step of the Chebyshev recurrence) in the
-    tiles ``tiles``."""
-    for i, l in ti.ndrange(tiles.shape[0], B**d):
-        p = tiles[i] * (B**d) + l
+def random_fill(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray(), seed: ti.u32):
+    """x = m * (a hash of (component, position, seed) in [0, 1)): a reproducible random vector made
+    where it lives (the power iteration's start), independent of threads and of the backend."""
+    for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            s = c1 * step[a, p] + c2 * dinv[a, p] * (b[a, p] - y[a, p])
-            step[a, p] = s
-            x[a, p] = x[a, p] + s
+            k = ti.cast(p, ti.u32) * ti.u32(d) + ti.u32(a) + seed * ti.u32(0x9E3779B9)
+            k ^= k >> 16
+            k *= ti.u32(0x7FEB352D)
+            k ^= k >> 15
+            k *= ti.u32(0x846CA68B)
+            k ^= k >> 16
+            x[a, p] = stored(x, m[a, p] * (ti.cast(k, ti.f64) / 4294967296.0))
 
 
 @ti.kernel
@@ -322,15 +419,7 @@ def scaled(d: ti.template(), x: ti.types.ndarray(), s: ti.types.ndarray(), omega
     """out = omega s x (elementwise)."""
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            out[a, p] = omega * s[a, p] * x[a, p]
-
-
-@ti.kernel
-def residual(d: ti.template(), b: ti.types.ndarray(), y: ti.types.ndarray(), r: ti.types.ndarray()):
-    """r = b - y."""
-    for p in range(b.shape[1]):
-        for a in ti.static(range(d)):
-            r[a, p] = b[a, p] - y[a, p]
+            out[a, p] = stored(out, omega * s[a, p] * x[a, p])
 
 
 @ti.kernel
@@ -347,7 +436,7 @@ def axpy(d: ti.template(), alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.nda
     """y += alpha x."""
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            y[a, p] = y[a, p] + alpha * x[a, p]
+            y[a, p] = stored(y, y[a, p] + alpha * x[a, p])
 
 
 @ti.kernel
@@ -355,29 +444,21 @@ def xpby(d: ti.template(), x: ti.types.ndarray(), beta: ti.f64, y: ti.types.ndar
     """y = x + beta y."""
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            y[a, p] = x[a, p] + beta * y[a, p]
+            y[a, p] = stored(y, x[a, p] + beta * y[a, p])
 
 
 @ti.kernel
 def copy(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     for p in range(src.shape[1]):
         for a in ti.static(range(d)):
-            dst[a, p] = src[a, p]
+            dst[a, p] = stored(dst, src[a, p])
 
 
 @ti.kernel
 def fill(d: ti.template(), x: ti.types.ndarray(), value: float):
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
-            x[a, p] = value
-
-
-@ti.kernel
-def multiply(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray()):
-    """x *= m (elementwise)."""
-    for p in range(x.shape[1]):
-        for a in ti.static(range(d)):
-            x[a, p] = x[a, p] * m[a, p]
+            x[a, p] = stored(x, value)
 
 
 @ti.kernel

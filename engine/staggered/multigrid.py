@@ -15,12 +15,13 @@ rigid modes of floating bodies bordered out.
 from __future__ import annotations
 
 import numpy as np
+import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
-from .operator import Level, device_array, dof_bodies, float_type, make_coarse_level, pairs, taichi_float
+from .operator import Level, device_array, dof_bodies, make_coarse_level, pairs
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -68,10 +69,13 @@ class Multigrid:
             if cut_share(coarse) > MAX_CUT_SHARE:
                 break
             self.levels.append(coarse)
-        # coarse tiles around each fine tile's parent, for the transfers
+        # coarse tiles around each fine tile's parent (prolongation), fine tiles around each
+        # coarse tile's children (restriction)
         self.parents = [device_array(up.layout.parents(lv.layout)) for up, lv in zip(self.levels, self.levels[1:])]
-        # per level: y = A x, r the residual, and the rhs / solution it receives from the level above
-        self.work = [tuple(lv.zeros() for _ in range(4)) for lv in self.levels]
+        self.children = [device_array(lv.layout.children(up.layout)) for up, lv in zip(self.levels, self.levels[1:])]
+        # per level: the residual (which is also the Chebyshev step), and the rhs / solution it
+        # receives from the level above (the finest level's come from the caller)
+        self.work = [tuple(lv.zeros() for _ in range(3 if k else 1)) for k, lv in enumerate(self.levels)]
         self.update()
 
     def update(self) -> None:
@@ -79,15 +83,20 @@ class Multigrid:
         fine = self.levels[0]
         for k in range(1, len(self.levels)):
             lv, up = self.levels[k], self.levels[k - 1]
-            touched, reach = lv.zeros(), lv.zeros()
-            kernels.restrict_add(lv.dim, taichi_float(), up.coords, self.parents[k - 1], lv.layout.count, device_array((up.active & ~up.free).astype(float)), touched)
-            kernels.restrict_add(lv.dim, taichi_float(), up.coords, self.parents[k - 1], lv.layout.count, device_array(up.active.astype(float)), reach)
-            share = touched.to_numpy().astype(np.float64) / np.maximum(reach.to_numpy().astype(np.float64), 1e-300)
+            d = lv.dim
+            # the shares P^T(active & ~free) / P^T(active), with the cycle's own restriction
+            # (device arrays: a host-array variant of the kernel would be compiled again)
+            ones, reach, kept = lv.zeros(), lv.zeros(), lv.zeros()
+            kernels.fill(d, ones, 1.0)
+            kernels.restrict(d, lv.coords, self.children[k - 1], ones, device_array(up.active, lv.dtype), reach)
+            kernels.restrict(d, lv.coords, self.children[k - 1], ones, up.mask, kept)
+            reach = reach.to_numpy().astype(np.float64)
+            share = (reach - kept.to_numpy()) / np.maximum(reach, 1e-300)
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
             if fine.shift != 0.0 or lv.shift != 0.0:
                 lv.set_shift(fine.shift, fine.density)
         self.coarse = CoarseSolver(self.levels[-1])
-        self.bounds = [_largest_eigenvalue(lv, self.work[k]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
+        self.bounds = [_largest_eigenvalue(lv, self.work[k][0]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
         self.bands = [boundary_band(lv) for lv in self.levels[:-1]]
 
     def precondition(self, r, z) -> None:
@@ -99,15 +108,12 @@ class Multigrid:
         if k == len(self.levels) - 1:
             self.coarse.solve(b, x)
             return
-        y, step = self.work[k][:2]
+        r = self.work[k][0]
         down = self.levels[k + 1]
         self._smooth(k, b, x, first=True)
-        lv.apply(x, y)
-        kernels.residual(lv.dim, b, y, step)
-        bc, xc = self.work[k + 1][2:]
-        kernels.fill(lv.dim, bc, 0.0)
-        kernels.restrict_add(lv.dim, taichi_float(), lv.coords, self.parents[k], down.layout.count, step, bc)
-        kernels.multiply(lv.dim, bc, down.mask)
+        lv.residual(x, b, r)
+        bc, xc = self.work[k + 1][1:]
+        kernels.restrict(lv.dim, down.coords, self.children[k], down.mask, r, bc)
         self._cycle(k + 1, bc, xc)
         kernels.prolong_add(lv.dim, lv.coords, self.parents[k], lv.mask, xc, x)
         self._smooth(k, b, x, first=False)
@@ -118,50 +124,51 @@ class Multigrid:
         lv = self.levels[k]
         band = self.bands[k]
         if first:
-            self._chebyshev(k, b, x, lv.dinv, lv.everywhere, SPREAD, DEGREE, first=True)
+            self._chebyshev(k, b, x, lv.dinv, None, SPREAD, DEGREE, first=True)
         if band is not None:
             self._chebyshev(k, b, x, band[0], band[1], BAND_SPREAD, BAND_DEGREE, first=False)
         if not first:
-            self._chebyshev(k, b, x, lv.dinv, lv.everywhere, SPREAD, DEGREE, first=False)
+            self._chebyshev(k, b, x, lv.dinv, None, SPREAD, DEGREE, first=False)
 
     def _chebyshev(self, k: int, b, x, dinv, part, spread: float, degree: int, first: bool) -> None:
         """``degree`` steps of Chebyshev iteration on D^-1 A with eigenvalues taken in
         [upper / spread, upper] (a fixed polynomial); updates only where ``dinv`` is non-zero,
-        computing A x only in ``part``'s tiles. ``first``: x is zero on entry."""
+        computing A x only at ``part``'s positions (all when None). ``first``: x is zero on entry."""
         lv = self.levels[k]
-        y, step = self.work[k][:2]
+        step = self.work[k][0]
         upper = self.bounds[k]
         lower = upper / spread
         theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
         sigma = theta / delta
         rho = 1.0 / sigma
         if first:
-            kernels.scaled(lv.dim, b, dinv, 1.0 / theta, step)
-            kernels.copy(lv.dim, step, x)
+            kernels.chebyshev_start(lv.dim, x, step, dinv, b, 1.0 / theta)
         else:
-            lv.apply(x, y, part)
-            kernels.fill(lv.dim, step, 0.0)
-            kernels.chebyshev_step(lv.dim, part.tiles, x, step, dinv, b, y, 0.0, 1.0 / theta)
+            lv.chebyshev_step(x, b, step, dinv, 0.0, 1.0 / theta, part)
         for _ in range(degree - 1):
-            lv.apply(x, y, part)
             rho_next = 1.0 / (2.0 * sigma - rho)
-            kernels.chebyshev_step(lv.dim, part.tiles, x, step, dinv, b, y, rho_next * rho, 2.0 * rho_next / delta)
+            lv.chebyshev_step(x, b, step, dinv, rho_next * rho, 2.0 * rho_next / delta, part)
             rho = rho_next
 
 
 def boundary_band(level: Level):
     """(D^-1 restricted to the band, its ``Part``) for the boundary smoothing of ``level``, or None
-    when no free DOF is within one cell of a cut cell or a prescribed DOF."""
-    fixed = device_array((level.active & ~level.free).any(axis=0).astype(np.int32))
-    near = device_array(np.zeros(level.size, dtype=np.int32))
-    kernels.boundary_band(level.dim, level.coords, level.tmap, level.vc, fixed, near)
-    members = level.free & (near.to_numpy() > 0)[None]
+    when no free DOF is within one cell of a cut cell or a prescribed DOF. The part lists the
+    band's positions, not its tiles: the band is a few cells thick, and its tiles (7,386 of
+    17,050 on the 256^3 shell) made each band step cost 75% of a full one."""
+    d, lay = level.dim, level.layout
+    vc = level.vc_host
+    seeds = lay.dense((((vc > 0) & (vc < 1)) | (level.active & ~level.free).any(axis=0)).astype(np.uint8))
+    # the 3^d block around each index: one running maximum per axis (a 3^d stencil per position
+    # cost seconds at 256^3)
+    for a in range(d):
+        seeds = ndi.maximum_filter1d(seeds, 3, axis=a, mode="constant")
+    members = level.free & (lay.flat(seeds) > 0)[None]
     if not members.any():
         return None
-    tiles = np.nonzero(members.reshape(level.dim, -1, level.layout.tile_size).any(axis=(0, 2)))[0]
     dinv = level.zeros()
-    kernels.scaled(level.dim, level.dinv, device_array(members.astype(float)), 1.0, dinv)
-    return dinv, level.part(tiles)
+    kernels.scaled(d, level.dinv, members.astype(level.dtype), 1.0, dinv)
+    return dinv, level.part(np.nonzero(members.any(axis=0))[0])
 
 
 def cut_share(level: Level) -> float:
@@ -171,20 +178,19 @@ def cut_share(level: Level) -> float:
     return np.count_nonzero((vc > 0) & (vc < 1)) / solid if solid else 1.0
 
 
-def _largest_eigenvalue(level: Level, work) -> float:
-    """Power iteration estimate of the largest eigenvalue of D^-1 A on the free DOFs."""
-    v, y = work[0], work[1]
-    rng = np.random.default_rng(7)
-    v.from_numpy((rng.random((level.dim, level.size)) * level.free).astype(float_type()))
+def _largest_eigenvalue(level: Level, v) -> float:
+    """Power iteration estimate of the largest eigenvalue of D^-1 A on the free DOFs (``v``: a
+    work array of the level). Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75
+    after 40): MARGIN times this estimate is the smoothers' upper bound as tuned."""
+    kernels.random_fill(level.dim, v, level.mask, 7)
     estimate = 1.0
+    norm = np.sqrt(kernels.dot(level.dim, v, v))
     for _ in range(POWER_STEPS):
-        norm = np.sqrt(kernels.dot(level.dim, v, v))
         if norm == 0.0:
             return 1.0
-        kernels.scaled(level.dim, v, level.mask, 1.0 / norm, v)
-        level.apply(v, y)
-        kernels.scaled(level.dim, y, level.dinv, 1.0, v)
-        estimate = np.sqrt(kernels.dot(level.dim, v, v))
+        # v <- D^-1 A (v / |v|) in one pass (D^-1 vanishes off the free DOFs)
+        level.preconditioned(v, v, 1.0 / norm)
+        norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
     return float(estimate)
 
 
@@ -226,7 +232,7 @@ class CoarseSolver:
         d = lay.dim
         active = level.active[comp, flat_pos]
         points = (np.tile(idx, (d, 1)) + 0.5 - 0.5 * np.eye(d, dtype=int)[comp]) * level.spacing
-        body = dof_bodies(level, np.tile(idx, (d, 1)), comp)
+        body = dof_bodies(level, comp, flat_pos)
         on = active & (body > 0)
         modes = free_modes(points[on], comp[on], ~free[on], body[on])
         free_index = -np.ones(len(comp), dtype=np.int64)
@@ -246,4 +252,4 @@ class CoarseSolver:
             rhs = np.zeros(self.lu.shape[0])
             rhs[: self.n] = b.to_numpy()[self.comp, self.pos]
             out[self.comp, self.pos] = self.lu.solve(rhs)[: self.n]
-        x.from_numpy(out.astype(float_type(), copy=False))
+        x.from_numpy(out.astype(lv.dtype, copy=False))

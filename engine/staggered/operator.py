@@ -33,21 +33,22 @@ def pairs(d: int) -> tuple[tuple[int, int], ...]:
 
 
 def float_type() -> type:
+    """The numpy float type of the solve precision (``solver.precision``)."""
     from ..runtime import ensure_initialized
 
     return np.float64 if ensure_initialized().precision == "f64" else np.float32
 
 
-def taichi_float():
-    """The Taichi type of the solver's float arrays."""
-    return ti.f64 if float_type() is np.float64 else ti.f32
+def taichi_float(dtype: type | None = None):
+    """The Taichi type of numpy float ``dtype`` (default: the solve precision's)."""
+    return ti.f64 if np.dtype(dtype or float_type()) == np.float64 else ti.f32
 
 
 def device_array(values: np.ndarray, dtype: type | None = None):
-    """A Taichi ndarray holding ``values`` (float arrays in the solve precision)."""
+    """A Taichi ndarray holding ``values`` (float arrays in the solve precision unless ``dtype``)."""
     values = np.asarray(values)
     if dtype is None:
-        dtype = float_type() if values.dtype.kind == "f" else values.dtype
+        dtype = float_type() if values.dtype.kind in "fb" else values.dtype
     values = np.ascontiguousarray(values, dtype=dtype)
     out = ti.ndarray(dtype={np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32}[np.dtype(dtype).type], shape=values.shape)
     out.from_numpy(values)
@@ -56,42 +57,52 @@ def device_array(values: np.ndarray, dtype: type | None = None):
 
 @dataclass(frozen=True)
 class Part:
-    """Tiles of a level an apply works on: ``tiles`` [m] int32 get y = A x, ``stress`` [k] int32
-    (``tiles`` and their neighbours) get the weighted stresses that it reads."""
+    """Positions an apply works on: ``update`` [m] int32 (sorted flat positions) get y = A x (or a
+    smoothing step), ``stress`` [k] int32 (``update`` and their neighbours across a face) get the
+    weighted stresses that it reads."""
 
-    tiles: object
+    update: object
     stress: object
+    m: int
+    k: int
 
 
 class Level:
     """The operator on one level. Fractions: vc [size] cells, ve [pairs, size] edges, vf [d, size]
-    faces (control-volume fractions in [0, 1]); spacing h [m]; lam, mu [Pa]."""
+    faces (control-volume fractions in [0, 1], f64 host arrays); spacing h [m]; lam, mu [Pa].
+    ``dtype``: the float type of its device arrays (default the solve precision); ``active``
+    [d, size] bool when already known (else computed from vc). ``ve`` is pruned in place."""
 
     def __init__(self, layout: TileLayout, spacing: float, vc: np.ndarray, ve: np.ndarray, vf: np.ndarray,
-                 lam: float, mu: float) -> None:
+                 lam: float, mu: float, dtype: type | None = None, active: np.ndarray | None = None) -> None:
         d = layout.dim
         self.layout, self.spacing, self.dim = layout, float(spacing), d
         self.lam, self.mu = float(lam), float(mu)
-        self.vc_host, self.ve_host, self.vf_host = vc, ve, vf
+        self.dtype = np.dtype(dtype or float_type()).type
         size, ts = layout.size, layout.tile_size
-        self.coords = device_array(layout.coords.astype(np.int32))
-        self.tmap = device_array(layout.tile_map.astype(np.int32))
+        vc = np.ascontiguousarray(vc, dtype=np.float64)
+        ve = np.ascontiguousarray(ve, dtype=np.float64)
+        coords = np.ascontiguousarray(layout.coords, dtype=np.int32)
+        tmap = np.ascontiguousarray(layout.tile_map, dtype=np.int32)
+        # setup kernels take the host arrays themselves (no device copies and transfers)
+        if active is None:
+            found = np.zeros((d, size), dtype=np.int32)
+            kernels.active_faces(d, coords, tmap, vc, found)
+            active = found.astype(bool)
+        kernels.prune_edges(d, coords, tmap, active.astype(np.int32), ve)
+        self.vc_host, self.ve_host, self.vf_host = vc, ve, np.asarray(vf, dtype=np.float64)
+        self.active = np.asarray(active, dtype=bool)
+        self.coords, self.tmap = device_array(coords), device_array(tmap)
         self.nbr = device_array(layout.neighbours())
-        every = device_array(np.arange(layout.count, dtype=np.int32))
-        self.everywhere = Part(every, every)
-        self.vc, self.ve = device_array(vc), device_array(ve)
-        active = device_array(np.zeros((d, size), dtype=np.int32))
-        kernels.active_faces(d, self.coords, self.tmap, self.vc, active)
-        kernels.prune_edges(d, self.coords, self.tmap, active, self.ve)
-        self.active = active.to_numpy().astype(bool)
-        self.ve_host = ve = self.ve.to_numpy().astype(np.float64)
+        self._unlisted = device_array(np.zeros(1, dtype=np.int32))  # the position list of a whole-level pass
+        self.vc, self.ve = device_array(vc, self.dtype), device_array(ve, self.dtype)
         full = np.ones(layout.count, dtype=bool)
         for v in (vc[None], ve):
             full &= np.all(v.reshape(len(v), -1, ts)[:, : layout.count] == 1.0, axis=(0, 2))
         self.full_tiles = int(full.sum())
         self.full = device_array(full.astype(np.int32))
-        self.sc = device_array(np.zeros((d, size)))
-        self.se = device_array(np.zeros((len(pairs(d)), size)))
+        self.sc = ti.ndarray(dtype=taichi_float(self.dtype), shape=(d, size))
+        self.se = ti.ndarray(dtype=taichi_float(self.dtype), shape=(len(pairs(d)), size))
         self.shift, self.density = 0.0, 0.0
         self.slivers = 0  # control volumes whose weight was raised to MIN_FRACTION
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
@@ -102,70 +113,113 @@ class Level:
         return self.layout.size
 
     def zeros(self):
-        return ti.ndarray(dtype=taichi_float(), shape=(self.dim, self.size))
+        """A zero [d, size] array in the level's float type."""
+        return ti.ndarray(dtype=taichi_float(self.dtype), shape=(self.dim, self.size))
 
     def set_free(self, free: np.ndarray) -> None:
         """free [d, size] bool: the unknowns (active and not prescribed)."""
         self.free = np.asarray(free, dtype=bool) & self.active
-        self.mask = device_array(self.free.astype(float))
-        self._update_diagonal()
+        self.mask = device_array(self.free, self.dtype)
+        self._dinv = None
 
     def set_shift(self, shift: float, density: float) -> None:
         """A = K + shift M with M = rho h^d Vf (backward Euler: shift = 1 / dt^2)."""
         self.shift, self.density = float(shift), float(density)
         if self.mass is None and shift != 0.0:
-            self.mass = device_array(density * self.spacing**self.dim * self.vf_host)
-        self._update_diagonal()
+            self.mass = device_array(density * self.spacing**self.dim * self.vf_host, self.dtype)
+        self._dinv = None
 
     def _mass_or_mask(self):
         return self.mass if self.mass is not None else self.mask
 
-    def _update_diagonal(self) -> None:
-        self.dinv = self.zeros()
-        d = self.dim
-        kernels.inverse_diagonal(d, self.coords, self.tmap, self.mask, self.vc, self.ve, self.lam, self.mu,
-                                 self.spacing ** (d - 2), self._mass_or_mask(), self.shift, self.dinv)
+    @property
+    def dinv(self):
+        """[d, size] the inverse diagonal of A on the free DOFs, zero elsewhere (built on first use
+        after the unknowns or the shift change: setup changes them more than once)."""
+        if self._dinv is None:
+            self._dinv = self.zeros()
+            d = self.dim
+            kernels.inverse_diagonal(d, self.coords, self.tmap, self.mask, self.vc, self.ve, self.lam, self.mu,
+                                     self.spacing ** (d - 2), self._mass_or_mask(), self.shift, self._dinv)
+        return self._dinv
 
-    def part(self, tiles: np.ndarray) -> Part:
-        """The ``Part`` of the kept tiles ``tiles`` [m] (tile numbers)."""
-        tiles = np.unique(np.asarray(tiles, dtype=np.int32))
-        halo = np.unique(self.layout.neighbours()[tiles])
-        halo = halo[halo < self.layout.count]
-        return Part(device_array(tiles), device_array(halo.astype(np.int32)))
+    def part(self, update: np.ndarray) -> Part:
+        """The ``Part`` of the flat positions ``update`` [m] (in kept tiles): the stresses it reads
+        are at those positions and their neighbours one index down and up along each axis."""
+        lay, d = self.layout, self.dim
+        update = np.unique(np.asarray(update, dtype=np.int64))
+        zero = lay.count * lay.tile_size
+        stress = [update] + [lay.shifted(update, a, step) for a in range(d) for step in (-1, 1)]
+        stress = np.unique(np.concatenate(stress))
+        stress = stress[stress < zero]
+        return Part(device_array(update.astype(np.int32)), device_array(stress.astype(np.int32)), len(update), len(stress))
+
+    def _stresses(self, x, part: Part | None) -> None:
+        d = self.dim
+        listed = part is not None
+        kernels.weighted_stresses(d, listed, part.stress if listed else self._unlisted,
+                                  part.k if listed else self.layout.count * self.layout.tile_size,
+                                  self.nbr, self.full, x, self.vc, self.ve, self.lam, self.mu, 1.0 / self.spacing,
+                                  self.sc, self.se)
+
+    def _divergence(self, mode: int, part: Part | None, x, b, dinv, step, c1: float, c2: float, y) -> None:
+        d = self.dim
+        listed = part is not None
+        kernels.stress_divergence(d, mode, listed, part.update if listed else self._unlisted,
+                                  part.m if listed else self.layout.count * self.layout.tile_size,
+                                  self.nbr, self.mask, self.sc, self.se, self.spacing ** (d - 1), x,
+                                  self._mass_or_mask(), self.shift, b, dinv, step, c1, c2, y)
 
     def apply(self, x, y, part: Part | None = None) -> None:
-        """y = A x on the free DOFs (x must vanish off them); only in ``part``'s tiles when given."""
-        d = self.dim
-        part = part or self.everywhere
-        kernels.weighted_stresses(d, part.stress, self.nbr, self.full, x, self.vc, self.ve,
-                                  self.lam, self.mu, 1.0 / self.spacing, self.sc, self.se)
-        kernels.stress_divergence(d, part.tiles, self.nbr, self.mask, self.sc, self.se,
-                                  self.spacing ** (d - 1), x, self._mass_or_mask(), self.shift, y)
+        """y = A x on the free DOFs (x must vanish off them); only at ``part``'s positions when given."""
+        self._stresses(x, part)
+        self._divergence(kernels.APPLY, part, x, y, y, y, 0.0, 0.0, y)
+
+    def residual(self, x, b, r) -> None:
+        """r = b - A x (b must vanish off the free DOFs)."""
+        self._stresses(x, None)
+        self._divergence(kernels.RESIDUAL, None, x, b, r, r, 0.0, 0.0, r)
+
+    def chebyshev_step(self, x, b, step, dinv, c1: float, c2: float, part: Part | None = None) -> None:
+        """step = c1 step + c2 dinv (b - A x), x += step, at ``part``'s positions (all when None);
+        dinv must vanish off the free DOFs. c1 = 0 does not read step."""
+        self._stresses(x, part)
+        self._divergence(kernels.CHEBYSHEV, part, x, b, dinv, step, c1, c2, step)
+
+    def preconditioned(self, x, y, c: float) -> None:
+        """y = c D^-1 A x (y may be x)."""
+        self._stresses(x, None)
+        self._divergence(kernels.PRECONDITIONED, None, x, y, self.dinv, y, 0.0, c, y)
 
     def apply_unmasked(self, x, y) -> None:
         """y = K x at every active DOF (for loads from prescribed values and reactions)."""
         saved = self.mask
-        self.mask = device_array(self.active.astype(float))
+        self.mask = device_array(self.active, self.dtype)
         try:
             self.apply(x, y)
         finally:
             self.mask = saved
 
 
-def dof_bodies(level: Level, index: np.ndarray, comp: np.ndarray) -> np.ndarray:
-    """Body label [n] (1, 2, ...; 0 if none) of face DOFs (comp [n], global index [n, d]): the
+def dof_bodies(level: Level, comp: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Body label [n] (1, 2, ...; 0 if none) of face DOFs (comp [n], flat position [n]): the
     connected component of material cells (edge connectivity: cells sharing only a vertex share
     no term) of a cell on either side of the face."""
-    d = level.dim
-    cell = level.layout.dense(level.vc_host)
-    labels, _ = ndi.label(cell > 0, structure=ndi.generate_binary_structure(d, 2))
-    body = np.zeros(len(index), dtype=np.int64)
-    for J in (index, index - np.eye(d, dtype=np.int64)[comp]):
-        ok = np.all((J >= 0) & (J < np.asarray(cell.shape)), axis=1)
-        lab = np.zeros(len(J), dtype=np.int64)
-        lab[ok] = labels[tuple(J[ok].T)]
-        body = np.where(body == 0, lab, body)
+    d, lay = level.dim, level.layout
+    labels, _ = ndi.label(lay.dense(level.vc_host) > 0, structure=ndi.generate_binary_structure(d, 2))
+    cell = lay.flat(labels.astype(np.int32))
+    body = cell[pos].astype(np.int64)
+    for a in range(d):
+        on = (comp == a) & (body == 0)
+        body[on] = cell[lay.shifted(pos[on], a, -1)]
     return body
+
+
+def _snap(v: np.ndarray) -> np.ndarray:
+    """:func:`weights` in place (the fine level's arrays are hundreds of MB)."""
+    v[v > 1.0 - ROUNDOFF] = 1.0
+    v[(v > 0) & (v < MIN_FRACTION)] = MIN_FRACTION
+    return v
 
 
 def weights(fractions: np.ndarray) -> np.ndarray:
@@ -178,8 +232,9 @@ def weights(fractions: np.ndarray) -> np.ndarray:
     return np.where((v > 0) & (v < MIN_FRACTION), MIN_FRACTION, v)
 
 
-def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
-    """The finest level: the kept tiles are those touching material, with exact fractions."""
+def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: type | None = None) -> Level:
+    """The finest level: the kept tiles are those touching material, with exact fractions.
+    ``dtype``: its device float type (default the solve precision)."""
     grid = fractions.grid
     d = grid.dim
     box = tuple(n + 1 for n in grid.shape)
@@ -191,37 +246,38 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float) -> Level:
     vc = layout.load(fractions.control[cell_offset])
     ve = np.stack([layout.load(fractions.control[s]) for s in edge_offsets])
     vf = np.stack([layout.load(fractions.control[s]) for s in unit])
-    vf = np.where(vf > 1.0 - ROUNDOFF, 1.0, vf)
+    vf[vf > 1.0 - ROUNDOFF] = 1.0
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
-    vc, ve = weights(vc), weights(ve)
-    level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu)
+    vc, ve = _snap(vc), _snap(ve)
+    level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype)
     level.slivers = slivers
     return level
 
 
 def make_coarse_level(fine: Level) -> Level:
-    """The level of spacing 2h: every control volume is a union of 2^d fine cells, so its fraction
-    is the mean of theirs (exact given the fine cell fractions)."""
+    """The level of spacing 2h, in the float type of ``fine``: every control volume is a union of
+    2^d fine cells, so its fraction is the mean of theirs (exact given the fine cell fractions,
+    which are read from the f64 host copy)."""
     d = fine.dim
     box = tuple((n - 1 + 1) // 2 + 3 for n in fine.layout.box)  # ceil(cells / 2) + 2 cells (+ 1 index)
-    layout = make_layout(box, dilate(np.unique(fine.layout.coords // 2, axis=0), d))
-    vc_dev = device_array(np.zeros(layout.size))
-    ve_dev = device_array(np.zeros((len(pairs(d)), layout.size)))
-    vf_dev = device_array(np.zeros((d, layout.size)))
-    kernels.coarse_fractions(d, device_array(layout.coords.astype(np.int32)), device_array(layout.tile_map.astype(np.int32)),
-                             fine.tmap, fine.layout.count, fine.vc, vc_dev, ve_dev, vf_dev)
-    return _pruned(layout, 2 * fine.spacing, vc_dev.to_numpy(), ve_dev.to_numpy(), vf_dev.to_numpy(), fine.lam, fine.mu)
+    layout = make_layout(box, dilate(fine.layout.coords // 2, d))
+    vc = np.zeros(layout.size)
+    ve = np.zeros((len(pairs(d)), layout.size))
+    vf = np.zeros((d, layout.size))
+    kernels.coarse_fractions(d, layout.coords, layout.tile_map, fine.layout.tile_map, fine.layout.count,
+                             fine.vc_host, vc, ve, vf)
+    return _pruned(layout, 2 * fine.spacing, vc, ve, vf, fine.lam, fine.mu, fine.dtype)
 
 
-def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float) -> Level:
+def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float, dtype: type | None) -> Level:
     """Drop the tiles holding no active DOF and no material, then build the level."""
     d, ts = layout.dim, layout.tile_size
-    active = device_array(np.zeros((d, layout.size), dtype=np.int32))
-    kernels.active_faces(d, device_array(layout.coords.astype(np.int32)), device_array(layout.tile_map.astype(np.int32)),
-                         device_array(vc), active)
-    keep = active.to_numpy().reshape(d, -1, ts)[:, : layout.count].any(axis=(0, 2))
+    found = np.zeros((d, layout.size), dtype=np.int32)
+    kernels.active_faces(d, layout.coords, layout.tile_map, np.ascontiguousarray(vc, dtype=np.float64), found)
+    active = found.astype(bool)
+    keep = active.reshape(d, -1, ts)[:, : layout.count].any(axis=(0, 2))
     keep |= (vc.reshape(-1, ts)[: layout.count] > 0).any(axis=1)
     if not keep.all():
         layout, order = layout.select(keep)
-        vc, ve, vf = reorder(vc, order, ts), reorder(ve, order, ts), reorder(vf, order, ts)
-    return Level(layout, spacing, vc, ve, vf, lam, mu)
+        vc, ve, vf, active = (reorder(v, order, ts) for v in (vc, ve, vf, active))
+    return Level(layout, spacing, vc, ve, vf, lam, mu, dtype, active)

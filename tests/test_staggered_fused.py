@@ -1,0 +1,177 @@
+"""The staggered solver's fused and listed kernels against the plain ones: the gathered
+restriction, operator passes over a list of positions (the boundary band), the fused residual,
+Chebyshev and power-iteration modes, the layout's flat helpers and the body labels."""
+
+import functools
+
+import numpy as np
+import pytest
+import taichi as ti
+import trimesh
+
+from engine.geometry.fractions import volume_fractions
+from engine.grid import make_grid
+from engine.runtime import init
+from engine.staggered import kernels as kn
+from engine.staggered.multigrid import Multigrid, boundary_band
+from engine.staggered import multigrid
+from engine.staggered.operator import device_array, dof_bodies, make_coarse_level, make_fine_level
+from tests.conftest import polygon_surface_2d, surface_of
+
+LAM, MU = 1.3, 0.7
+
+
+@pytest.fixture(scope="module", autouse=True)
+def runtime():
+    init("cpu", "f64")
+
+
+@functools.lru_cache
+def fractions(d):
+    if d == 2:
+        th = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+        surf = polygon_surface_2d(np.stack([np.cos(th), 0.7 * np.sin(th)], axis=1))
+        return volume_fractions(surf, make_grid(*surf.bounds, resolution=40))
+    surf = surface_of(trimesh.creation.icosphere(3, radius=1.0))
+    return volume_fractions(surf, make_grid(*surf.bounds, resolution=18))
+
+
+def kept(lev, v):
+    """v with the zero tile cleared (no kernel writes there; random test data must not either)."""
+    v = np.array(v)
+    v[..., lev.layout.count * lev.layout.tile_size :] = 0.0
+    return v
+
+
+def clamped(d):
+    lev = make_fine_level(fractions(d), LAM, MU)
+    idx = lev.layout.indices()
+    low = np.zeros(lev.size, dtype=bool)
+    low[: len(idx)] = idx[:, d - 1] < 5
+    lev.set_free(lev.active & ~low[None])
+    return lev
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_gathered_restriction_equals_the_scatter(d, rng):
+    fine = make_fine_level(fractions(d), LAM, MU)
+    coarse = make_coarse_level(fine)
+    f = kept(fine, rng.standard_normal((d, fine.size)))
+    want = coarse.zeros()
+    kn.fill(d, want, 0.0)
+    kn.restrict_add(d, ti.f64, fine.coords, device_array(fine.layout.parents(coarse.layout)), coarse.layout.count,
+                    device_array(f), want)
+    mask = kept(coarse, rng.random((d, coarse.size)))
+    got = coarse.zeros()
+    kn.restrict(d, coarse.coords, device_array(coarse.layout.children(fine.layout)), device_array(mask),
+                device_array(f), got)
+    want = want.to_numpy() * mask
+    assert np.abs(want).max() > 1.0
+    np.testing.assert_allclose(got.to_numpy(), want, rtol=0, atol=1e-13 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_layout_flat_and_shifted(d, rng):
+    lay = make_fine_level(fractions(d), LAM, MU).layout
+    dense = rng.standard_normal(lay.box)
+    flat = lay.flat(dense)
+    np.testing.assert_array_equal(lay.dense(flat), np.where(lay.dense(np.ones(lay.size)) > 0, dense, 0.0))
+    idx = lay.indices()
+    pos = rng.choice(len(idx), 500, replace=False)
+    for a in range(d):
+        for step in (-1, 1):
+            moved = idx[pos].copy()
+            moved[:, a] += step
+            want = lay.positions(moved)
+            got = lay.shifted(pos, a, step)
+            in_box = want >= 0
+            np.testing.assert_array_equal(got[in_box], want[in_box])
+            # beyond the box: a position in its (kept) tile, whose values are zero, or the zero tile
+            tiles = moved[~in_box] // 8
+            on_grid = np.all((tiles >= 0) & (tiles < np.asarray(lay.tile_map.shape)), axis=1)
+            tile_of = np.full(len(tiles), lay.count)
+            tile_of[on_grid] = lay.tile_map[tuple(tiles[on_grid].T)]
+            np.testing.assert_array_equal(got[~in_box] // lay.tile_size, tile_of)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_listed_passes_equal_the_full_ones_at_their_positions(d, rng):
+    lev = clamped(d)
+    band = boundary_band(lev)
+    assert band is not None
+    dinv, part = band
+    x = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    full, listed = lev.zeros(), lev.zeros()
+    kn.fill(d, listed, 0.0)
+    lev.apply(device_array(x), full)
+    lev.apply(device_array(x), listed, part)
+    on = part.update.to_numpy()
+    assert 0 < len(on) < lev.layout.count * lev.layout.tile_size
+    np.testing.assert_array_equal(listed.to_numpy()[:, on], full.to_numpy()[:, on])
+    off = np.ones(lev.size, dtype=bool)
+    off[on] = False
+    assert not np.any(listed.to_numpy()[:, off])
+    # a Chebyshev step over the part moves only the band's DOFs, by c2 D_band^-1 (b - A x)
+    b = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    xs, step = device_array(x), lev.zeros()
+    lev.chebyshev_step(xs, device_array(b), step, dinv, 0.0, 0.3, part)
+    want = x + 0.3 * dinv.to_numpy() * (b - full.to_numpy())
+    np.testing.assert_allclose(xs.to_numpy(), want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_fused_modes_equal_their_unfused_sums(d, rng):
+    lev = clamped(d)
+    x = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    b = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    s0 = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    ax = lev.zeros()
+    lev.apply(device_array(x), ax)
+    ax = ax.to_numpy()
+    scale = np.abs(ax).max() + np.abs(b).max()
+    r = lev.zeros()
+    lev.residual(device_array(x), device_array(b), r)
+    np.testing.assert_allclose(r.to_numpy(), b - ax, rtol=0, atol=1e-13 * scale)
+    dinv = lev.dinv.to_numpy()
+    xs, step = device_array(x), device_array(s0)
+    lev.chebyshev_step(xs, device_array(b), step, lev.dinv, 0.4, 0.7)
+    want_step = 0.4 * s0 + 0.7 * dinv * (b - ax)
+    np.testing.assert_allclose(step.to_numpy(), want_step, rtol=0, atol=1e-13 * np.abs(want_step).max())
+    np.testing.assert_allclose(xs.to_numpy(), x + want_step, rtol=0, atol=1e-13 * np.abs(x + want_step).max())
+    v = device_array(x)
+    lev.preconditioned(v, v, 0.5)  # in place
+    want = 0.5 * dinv * ax
+    np.testing.assert_allclose(v.to_numpy(), want, rtol=0, atol=1e-13 * np.abs(want).max())
+
+
+def test_body_labels_of_two_bodies_and_their_faces():
+    a = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    b = trimesh.creation.box(bounds=[[1.5, 0, 0], [2.5, 1, 1]])
+    surf = surface_of(trimesh.util.concatenate([a, b]))
+    lev = make_fine_level(volume_fractions(surf, make_grid(*surf.bounds, resolution=20)), LAM, MU)
+    comp, pos = np.nonzero(lev.active[:, : lev.layout.count * lev.layout.tile_size])
+    body = dof_bodies(lev, comp, pos)
+    assert set(np.unique(body)) == {1, 2}
+    x = lev.layout.indices()[pos, 0] * lev.spacing + np.asarray(fractions_origin(surf))[0]
+    assert np.all(body[x < 1.2] == body[np.argmin(x)]) and np.all(body[x > 1.3] != body[np.argmin(x)])
+
+
+def fractions_origin(surf):
+    return make_grid(*surf.bounds, resolution=20).origin
+
+
+def test_the_cycle_is_symmetric_with_the_listed_band(rng, monkeypatch):
+    """The V-cycle with the band as a list of positions is still symmetric to round-off."""
+    monkeypatch.setattr(multigrid, "MAX_CUT_SHARE", 1.0)
+    lev = clamped(3)
+    mg = Multigrid(lev)
+    assert len(mg.levels) >= 2 and all(band is not None for band in mg.bands)
+
+    def cycle(v):
+        out = lev.zeros()
+        mg.precondition(device_array(v), out)
+        return out.to_numpy()
+
+    v = kept(lev, rng.standard_normal((3, lev.size)) * lev.free)
+    w = kept(lev, rng.standard_normal((3, lev.size)) * lev.free)
+    assert np.sum(v * cycle(w)) == pytest.approx(np.sum(w * cycle(v)), rel=1e-11)
