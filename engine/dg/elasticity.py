@@ -603,19 +603,10 @@ def _rigid_fields(x: np.ndarray) -> np.ndarray:
 
 def _tractions(load, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Traction [Q, 3] [Pa] of a surface load at points with unit outward normals."""
-    q = len(points)
-    if load.pressure is not None:
-        t = -float(load.pressure) * normals
-    elif load.stress is not None:
-        sigma = np.asarray(load.stress(points) if callable(load.stress) else load.stress, dtype=float)
-        sigma = np.broadcast_to(sigma, (q, 3, 3)) if sigma.shape == (3, 3) else sigma
-        t = np.einsum("qij,qj->qi", sigma, normals)
-    else:
-        t = np.asarray(load.traction(points) if callable(load.traction) else load.traction, dtype=float)
-        t = np.broadcast_to(t, (q, 3)) if t.shape == (3,) else t
-    if t.shape != (q, 3) or not np.all(np.isfinite(t)):
-        raise BoundaryError(f"{load.name}: the traction must be finite with 3 components at every surface point")
-    return np.array(t)
+    from ..staggered.sampling import tractions
+
+    return tractions(points, normals, name=load.name, traction=load.traction, pressure=load.pressure,
+                     stress=load.stress)
 
 
 def _point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:

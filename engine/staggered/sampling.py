@@ -186,7 +186,15 @@ def boundary_tractions(
     pieces, _ = region.clip(surface.vertices[surface.faces])
     points, weights, normals = surface_quadrature(pieces.reshape(-1, d, d), spacing)
     require_selection(len(weights), "surface", name)
-    q = len(points)
+    return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
+
+
+def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=None, pressure: float | None = None,
+              stress=None) -> np.ndarray:
+    """Traction [Q, d] [Pa] at surface points [Q, d] with unit outward normals [Q, d]: -p n for a
+    pressure, sigma n for a stress (constant [d, d] or callable), else the traction (constant [d] or
+    callable). ValueError naming ``name`` for a wrong shape or a non-finite value."""
+    q, d = points.shape
     if pressure is not None:
         t = -float(pressure) * normals
     elif stress is not None:
@@ -202,7 +210,7 @@ def boundary_tractions(
             raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
     if not np.all(np.isfinite(t)):
         raise ValueError(f"{name}: the traction is not finite at some surface points")
-    return points, weights, np.array(t)
+    return np.array(t)
 
 
 def _read(grid: Grid, index: np.ndarray, a: int, lookup: Lookup) -> tuple[np.ndarray, np.ndarray]:
