@@ -1,13 +1,17 @@
 """DG method floor: a sphere shell on a 16^3 grid, k = 2, static; stages and assembly throughput.
 
     .venv/bin/python -m benchmarks.dg [--resolution 16] [--degree 2] [--repeats 3] [--json out.json]
+    .venv/bin/python -m benchmarks.dg --solvers [--resolution 16] [--degree 2]
+
+``--solvers`` builds the same system once and times its linear solvers side by side, each in its
+own spawned process: MKL PARDISO Cholesky (the one used), scipy SuperLU (the fallback), Taichi's
+SparseSolver LLT and pyamg smoothed-aggregation CG (rtol 1e-10, rigid modes as near-null space).
 
 Shell: icospheres (subdivisions 5) of radius 1 and 0.6, clamped below z = -0.8, gravity,
 E = 1e6, nu = 0.3, IP, penalty 10. Each repeat runs in its own spawned process (cold geometry
 cache, warm Taichi kernel cache after the first); medians over repeats.
 """
 
-from __future__ import annotations
 
 import argparse
 import json
@@ -19,7 +23,8 @@ import time
 from pathlib import Path
 
 
-def _run(resolution: int, degree: int, queue) -> None:
+def _shell_method(resolution: int, degree: int):
+    """(DGElasticity, slicing seconds, discretization seconds) of the benchmark shell."""
     import numpy as np
     import trimesh
 
@@ -45,17 +50,91 @@ def _run(resolution: int, degree: int, queue) -> None:
     m = DGElasticity(cut=cut, surface=surface, material=Material(1e6, 0.3, 1000), degree=degree, flux="ip",
                      penalty=10, prescribed=[Prescribed(clamp, (0, 0, 0), "base")],
                      body_force=np.array([0, 0, -9.81e3]))
-    t2 = time.perf_counter()
+    return m, t1 - t0, time.perf_counter() - t1
+
+
+def _run(resolution: int, degree: int, queue) -> None:
+    m, slicing, discretization = _shell_method(resolution, degree)
+    t = time.perf_counter()
     st = m.solve()
-    t3 = time.perf_counter()
+    solve = time.perf_counter() - t
     queue.put({
-        "elements": m.elements.count, "pieces": cut.num_pieces, "merged": m.elements.merged, "dofs": m.size,
-        "slicing_s": t1 - t0, "discretization_s": t2 - t1, "solve_s": t3 - t2, "total_s": t3 - t0,
+        "elements": m.elements.count, "pieces": m.cut.num_pieces, "merged": m.elements.merged, "dofs": m.size,
+        "slicing_s": slicing, "discretization_s": discretization, "solve_s": solve,
+        "total_s": slicing + discretization + solve,
         "stages": m.timings, "nnz": int(m.matrix.nnz), "residual": st.stats.residual, "eta": m.eta,
         "assembly_elements_per_s": m.elements.count / (m.timings["element_blocks"] + m.timings["assembly"]),
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
         "backend": m._factor.backend,
     })
+
+
+def _solver(name: str, resolution: int, degree: int, queue) -> None:
+    """Time one linear solver on the shell's system: setup (factorisation / hierarchy) and solve."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    m, _, _ = _shell_method(resolution, degree)
+    A = sp.csr_matrix(m.matrix)
+    b = m._rhs(1.0, 1.0, None)
+    reference = m._factor.solve(b)
+    m._factor.free()
+    t0 = time.perf_counter()
+    if name == "pardiso":
+        from engine.solvers.direct import Cholesky
+
+        f = Cholesky(A)
+        t1 = time.perf_counter()
+        x = f.solve(b)
+    elif name == "superlu":
+        import scipy.sparse.linalg as spla
+
+        lu = spla.splu(sp.csc_matrix(A), diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        t1 = time.perf_counter()
+        x = lu.solve(b)
+    elif name == "taichi-llt":
+        import taichi as ti  # a benchmark, not engine code: the runtime rule is for engine/
+
+        coo = A.tocoo()
+        rows, cols, vals = coo.row.astype(np.int32), coo.col.astype(np.int32), coo.data.astype(np.float64)
+        builder = ti.linalg.SparseMatrixBuilder(A.shape[0], A.shape[1], max_num_triplets=len(vals), dtype=ti.f64)
+
+        @ti.kernel
+        def fill(K: ti.types.sparse_matrix_builder(), r: ti.types.ndarray(), c: ti.types.ndarray(),
+                 v: ti.types.ndarray()):
+            for k in range(r.shape[0]):
+                K[r[k], c[k]] += v[k]
+
+        fill(builder, rows, cols, vals)
+        K = builder.build()
+        solver = ti.linalg.SparseSolver(dtype=ti.f64, solver_type="LLT")
+        solver.analyze_pattern(K)
+        solver.factorize(K)
+        t1 = time.perf_counter()
+        bt = ti.ndarray(ti.f64, shape=A.shape[0])
+        bt.from_numpy(b)
+        x = solver.solve(bt).to_numpy()
+    elif name == "pyamg-cg":
+        import pyamg
+        import scipy.sparse.linalg as spla
+
+        B = np.stack([m._mode_coefficients(np.arange(m.elements.count), np.zeros(3), np.eye(6)[:, j:j + 1])[:, 0]
+                      for j in range(6)], axis=1)
+        ml = pyamg.smoothed_aggregation_solver(A, B=B, symmetry="symmetric")
+        M = ml.aspreconditioner(cycle="V")
+        t1 = time.perf_counter()
+        its = []
+        x, info = spla.cg(A, b, rtol=1e-10, M=M, maxiter=2000, callback=lambda xk: its.append(1))
+        if info != 0:
+            x = np.full_like(b, np.nan)
+    else:
+        raise SystemExit(f"unknown solver {name}")
+    t2 = time.perf_counter()
+    queue.put({"solver": name, "dofs": A.shape[0], "nnz": int(A.nnz), "setup_s": t1 - t0, "solve_s": t2 - t1,
+               "total_s": t2 - t0, "iterations": len(its) if name == "pyamg-cg" else 1,
+               "residual": float(np.linalg.norm(A @ x - b) / np.linalg.norm(b)),
+               "difference": float(np.linalg.norm(x - reference) / np.linalg.norm(reference)),
+               "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
 
 
 def main() -> None:
@@ -64,8 +143,21 @@ def main() -> None:
     ap.add_argument("--degree", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--solvers", action="store_true", help="time the linear solvers side by side")
     a = ap.parse_args()
     ctx = mp.get_context("spawn")
+    if a.solvers:
+        rows = []
+        for name in ("pardiso", "superlu", "taichi-llt", "pyamg-cg"):
+            q = ctx.Queue()
+            p = ctx.Process(target=_solver, args=(name, a.resolution, a.degree, q))
+            p.start()
+            p.join()
+            rows.append(q.get() if p.exitcode == 0 else {"solver": name, "failed": f"exit code {p.exitcode}"})
+            print(json.dumps(rows[-1]), flush=True)
+        if a.json:
+            a.json.write_text(json.dumps(rows, indent=1))
+        return
     runs = []
     for _ in range(a.repeats):
         q = ctx.Queue()

@@ -158,7 +158,10 @@ class DGMethod(SpecModel):
     kind: Literal["dg"] = "dg"
     degree: Literal[1, 2] = Field(1, description="Total polynomial degree per element.")
     flux: Literal["ip", "bz"] = Field("ip", description="'ip' symmetric interior penalty, 'bz' Babuska-Zlamal.")
-    penalty: float = Field(20.0, gt=0, description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+).")
+    penalty: float | None = Field(
+        None, gt=0, json_schema_extra=not_null,
+        description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+); doubled until the matrix is "
+                    "positive definite. Default by degree: 2.5 (k=1), 10 (k=2); a larger eta makes k=1 stiffer.")
 
 
 Method = Annotated[

@@ -196,7 +196,7 @@ def test_defaults() -> None:
     assert (spec.solver.precision, spec.solver.arch) == ("f64", "auto")
     assert (spec.output.fields, spec.output.probes, spec.output.surface) == (["displacement"], [], True)
     dg = parse_job({**MINIMAL, "method": {"kind": "dg"}}).method
-    assert (dg.degree, dg.flux, dg.penalty) == (1, "ip", 20.0)
+    assert (dg.degree, dg.flux, dg.penalty) == (1, "ip", None)  # None: the degree's default (engine.dg.elasticity.DEFAULT_PENALTY)
     assert parse_job({**MINIMAL, "dimension": 2}).loads.gravity == (0.0, 0.0)
 
 

@@ -23,12 +23,12 @@ SOLVER = {"rtol": 1e-12, "max_iterations": 5000, "precision": "f64", "arch": "cp
 
 
 def _spec(dim: int, geometry: dict, grid: dict, material: dict, boundaries: list, *, analysis=None,
-          fields=("displacement",), probes=(), surface=False, rtol=1e-12) -> dict:
+          fields=("displacement",), probes=(), surface=False, rtol=1e-12, method=None) -> dict:
     return {
         "dimension": dim,
         "geometry": geometry,
         "grid": grid,
-        "method": {"kind": "staggered"},
+        "method": method or {"kind": "staggered"},
         "material": material,
         "boundaries": boundaries,
         "analysis": analysis or {"kind": "static"},
@@ -270,7 +270,7 @@ def test_quasistatic_steps_are_the_static_solution_scaled():
 # --- 5. dynamics of a bar -----------------------------------------------------------------------
 
 
-def _bar_dynamics(tmp_path, dt, steps):
+def _bar_dynamics(tmp_path, dt, steps, method=None):
     # nu = 0: lambda = 0 and the axial motion u_x(x, t) is exactly 1D on the grid (no lateral
     # coupling); rho, E give c = 4 m/s, so the period 4 L / c of the clamped-free bar is 1 s.
     L, W, h = 1.0, 0.1, 0.05
@@ -281,24 +281,32 @@ def _bar_dynamics(tmp_path, dt, steps):
         trimesh.creation.box(bounds=[[0, 0, 0], [L, W, W]]).export(path)
     spec = _spec(3, {"mesh": "rod.stl"}, {"cell_size": h, "padding": 1},
                  {"youngs_modulus": E, "poisson_ratio": 0.0, "density": rho},
-                 [  # the slab x <= 0.6 h holds the u_x samples at x = 0 and u_y, u_z at x = h/2
-                     {"kind": "displacement", "name": "clamp", "region": {"box": [[-1, -1, -1], [0.6 * h, 1, 1]]},
-                      "value": [0, 0, 0]},
+                 [  # staggered: the slab x <= 0.6 h holds the u_x samples at x = 0 and u_y, u_z at x = h/2;
+                     # DG: the end face only (clamped sides near it would shear the section)
+                     {"kind": "displacement", "name": "clamp", "value": [0, 0, 0],
+                      "region": {"box": [[-1, -1, -1], [0.6 * h if method is None else 1e-9, 1, 1]]}},
                      {"kind": "traction", "name": "pull",
                       "region": {"halfspace": {"point": [L, 0, 0], "normal": [-1, 0, 0]}}, "value": [traction, 0, 0]},
                  ],
-                 analysis={"kind": "dynamic", "time_step": dt, "steps": steps}, probes=[[L, W / 2, W / 2]], rtol=1e-10)
+                 analysis={"kind": "dynamic", "time_step": dt, "steps": steps}, probes=[[L, W / 2, W / 2]], rtol=1e-10,
+                 method=method)
     result = _run(spec, path)
     times = np.array([s.time for s in result.steps])
     tip = np.array([s.probes["displacement"][0] for s in result.steps])
     return result, times, tip, traction * L / E, 4 * L / c
 
 
-def test_bar_under_sudden_end_load_oscillates_with_the_period_4L_over_c(tmp_path):
+BAR_METHODS = [None, {"kind": "dg", "degree": 1}, {"kind": "dg", "degree": 2}]
+
+
+@pytest.mark.parametrize("method", BAR_METHODS, ids=["staggered", "dg1", "dg2"])
+def test_bar_under_sudden_end_load_oscillates_with_the_period_4L_over_c(tmp_path, method):
     period = 1.0
-    result, t, tip, static, period = _bar_dynamics(tmp_path, period / 200, 320)
+    result, t, tip, static, period = _bar_dynamics(tmp_path, period / 200, 320, method)
     np.testing.assert_allclose(t, period / 200 * np.arange(1, 321), rtol=1e-12)
-    assert np.abs(tip[:, 1:]).max() <= 1e-12 * static  # no lateral motion (nu = 0)
+    # nu = 0: no lateral motion. DG: the penalty per unit area is larger on the half-cut pieces of the
+    # section than on its full cells, so the discrete section is not uniform (measured 1.9e-5 k = 1, 2.5e-6 k = 2)
+    assert np.abs(tip[:, 1:]).max() <= (1e-12 if method is None else 1e-4) * static
     u = tip[:, 0] / static
     # step load from rest: the tip swings between 0 and twice the static displacement
     assert 1.7 <= u[:200].max() <= 2.0 and u[150:250].min() <= 0.3 and u.min() >= -0.05
@@ -314,8 +322,9 @@ def test_bar_under_sudden_end_load_oscillates_with_the_period_4L_over_c(tmp_path
     assert abs(crossings[0] - period / 4) <= 0.05 * period
 
 
-def test_bar_with_large_backward_euler_steps_relaxes_to_the_static_solution(tmp_path):
-    result, t, tip, static, period = _bar_dynamics(tmp_path, 1.0, 5)
+@pytest.mark.parametrize("method", BAR_METHODS, ids=["staggered", "dg1", "dg2"])
+def test_bar_with_large_backward_euler_steps_relaxes_to_the_static_solution(tmp_path, method):
+    result, t, tip, static, period = _bar_dynamics(tmp_path, 1.0, 5, method)
     np.testing.assert_allclose(t, np.arange(1, 6), rtol=1e-12)
     u = tip[:, 0] / static
     assert np.all(np.isfinite(tip)) and np.all(np.abs(u) <= 2.0)

@@ -1,0 +1,234 @@
+"""Run time against error, side by side in one run: voxelastic's methods and the peer (issue 6.1).
+
+    .venv/bin/python -m benchmarks accuracy [--quick | --full] [--problems lame,annulus,ball]
+        [--methods staggered,dg1,dg2,p1,p2] [--repeats 3] [--out docs/accuracy]
+
+Problems and probes: ``benchmarks.problems``. Methods: the staggered method, DG k = 1 and k = 2
+(IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
+scikit-fem P1 / P2 on gmsh meshes, pyamg CG) at several mesh sizes. Every run is a whole job in
+its own spawned process (geometry, discretisation, solve, fields at the probes; no geometry
+cache): wall time measured around ``engine.simulate`` / ``run_peer`` and the process's peak RSS.
+Runs are alternated (repeat r of every configuration before repeat r + 1) and medians reported.
+
+Errors: relative L2 over the 1200 probes of the displacement and of the von Mises stress.
+Output under --out: accuracy.json (every run and the medians), accuracy.png (log-log error vs
+time, one line per method and problem) and accuracy.md (the table: for each error target, each
+method's time over the peer's at that error, the faster of P1 / P2, interpolated log-log on the
+measured curves; > 1 means voxelastic is slower).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import platform
+import queue
+import resource
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+TARGETS = (1e-2, 1e-3, 1e-4)
+# cell sizes h [m] (mesh sizes for the peer) per problem and method; --quick keeps the first few
+SIZES = {
+    "lame": {"staggered": [1 / 6, 1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
+             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.2, 0.14, 0.1, 0.07], "p2": [0.4, 0.28, 0.2, 0.14]},
+    "ball": {"staggered": [1 / 6, 1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
+             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.28, 0.2, 0.14, 0.1], "p2": [0.4, 0.28, 0.2, 0.14]},
+    "annulus": {"staggered": [1 / 20, 1 / 40, 1 / 80, 1 / 160, 1 / 320], "p1": [0.05, 0.025, 0.0125, 0.00625],
+                "p2": [0.1, 0.05, 0.025, 0.0125]},
+}
+QUICK = 3  # sizes per method with --quick
+LABELS = {"staggered": "voxelastic staggered", "dg1": "voxelastic DG k=1", "dg2": "voxelastic DG k=2",
+          "p1": "scikit-fem P1", "p2": "scikit-fem P2 (curved)"}
+
+
+def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
+    from benchmarks.problems import problem, relative_l2
+    from engine import simulate
+    from engine.geometry.cache import GeometryCache
+
+    p = problem(problem_name)
+    kind = {"staggered": {"kind": "staggered"}, "dg1": {"kind": "dg", "degree": 1},
+            "dg2": {"kind": "dg", "degree": 2}}[method]
+    spec, mesh, functions = p.job(kind, h)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = None
+        if mesh is not None:
+            path = Path(tmp) / spec["geometry"]["mesh"].replace(".stl", ".ply")
+            spec["geometry"]["mesh"] = path.name
+            mesh.export(path)  # binary PLY keeps float64 vertices
+        t0 = time.perf_counter()
+        result = simulate(spec, path, cache=GeometryCache(None), functions=functions)
+        seconds = time.perf_counter() - t0
+    u = result.fields.probes["displacement"]
+    vm = result.fields.probes["von_mises"]
+    queue.put({"problem": problem_name, "method": method, "h": h, "seconds": seconds,
+               "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+               "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes)),
+               "iterations": result.solver.iterations, "residual": result.solver.residual,
+               "stages": result.solver.stage_times, "warnings": result.solver.warnings})
+
+
+def _peer(problem_name: str, method: str, h: float, queue) -> None:
+    from benchmarks.peer import run_peer
+
+    # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py)
+    order = int(method[1])
+    out = run_peer(problem_name, order, h, geometry="curved" if order == 2 else "straight")
+    out = {k: v for k, v in out.items() if k not in ("displacement", "von_mises")}
+    out.update({"problem": problem_name, "method": method, "h": h,
+                "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
+    queue.put(out)
+
+
+def _one(problem_name: str, method: str, h: float, timeout: float) -> dict:
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    target = _peer if method in ("p1", "p2") else _voxelastic
+    proc = ctx.Process(target=target, args=(problem_name, method, h, q))
+    t0 = time.perf_counter()
+    proc.start()
+    row = None
+    while row is None and time.perf_counter() - t0 < timeout:
+        try:
+            row = q.get(timeout=1.0)
+        except queue.Empty:
+            if not proc.is_alive() and q.empty():
+                break
+    if row is None:  # a crash or a timeout is a row of the table, not an abort
+        why = f"exit code {proc.exitcode}" if proc.exitcode is not None else f"timed out after {timeout:g} s"
+        row = {"problem": problem_name, "method": method, "h": h, "failed": why}
+    proc.join(timeout=10)
+    if proc.is_alive():
+        proc.kill()
+    row["process_s"] = time.perf_counter() - t0
+    return row
+
+
+def medians(runs: list[dict]) -> list[dict]:
+    """One row per (problem, method, h): medians of seconds and memory, errors of the first run."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in runs:
+        groups.setdefault((r["problem"], r["method"], r["h"]), []).append(r)
+    out = []
+    for (prob, method, h), rs in groups.items():
+        ok = [r for r in rs if "failed" not in r]
+        if not ok:
+            out.append({"problem": prob, "method": method, "h": h, "failed": rs[0]["failed"]})
+            continue
+        row = {k: v for k, v in ok[0].items() if k not in ("seconds", "peak_rss_gib", "process_s", "stages")}
+        row["seconds"] = statistics.median(r["seconds"] for r in ok)
+        row["peak_rss_gib"] = statistics.median(r["peak_rss_gib"] for r in ok)
+        row["repeats"] = len(ok)
+        out.append(row)
+    return out
+
+
+def time_at(rows: list[dict], target: float, key: str = "error_u") -> float | None:
+    """Run time [s] at which a method's error curve reaches ``target``: log-log interpolation between
+    the two measured points around it; None when no measured run is that accurate."""
+    pts = sorted((r[key], r["seconds"]) for r in rows if "failed" not in r and np.isfinite(r[key]) and r[key] > 0)
+    if not pts or min(e for e, _ in pts) > target:
+        return None
+    if max(e for e, _ in pts) <= target:
+        return min(t for e, t in pts if e <= target)  # even the cheapest run is that accurate
+    for (e0, t0), (e1, t1) in zip(pts, pts[1:]):  # sorted by error: e0 <= target <= e1
+        if e0 <= target <= e1:
+            w = (np.log(target) - np.log(e0)) / (np.log(e1) - np.log(e0)) if e1 > e0 else 0.0
+            return float(np.exp(np.log(t0) + w * (np.log(t1) - np.log(t0))))
+    return None
+
+
+def table(rows: list[dict], key: str = "error_u") -> str:
+    """Markdown: per problem and error target, each method's time and its ratio to the faster peer."""
+    lines = ["| problem | error target | " + " | ".join(LABELS[m] for m in LABELS) + " |",
+             "|---|---|" + "---|" * len(LABELS)]
+    for prob in dict.fromkeys(r["problem"] for r in rows):
+        mine = [r for r in rows if r["problem"] == prob]
+        for target in TARGETS:
+            times = {m: time_at([r for r in mine if r["method"] == m], target, key) for m in LABELS}
+            peers = [t for m, t in times.items() if m in ("p1", "p2") and t is not None]
+            peer = min(peers) if peers else None
+            cells = []
+            for m in LABELS:
+                t = times[m]
+                if t is None:
+                    cells.append("not reached" if any(r["method"] == m for r in mine) else "-")
+                elif m in ("p1", "p2") or peer is None:
+                    cells.append(f"{t:.2f} s")
+                else:
+                    cells.append(f"{t:.2f} s ({t / peer:.2g}x)")
+            lines.append(f"| {prob} | {target:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    problems = list(dict.fromkeys(r["problem"] for r in rows))
+    fig, axes = plt.subplots(1, len(problems), figsize=(5.5 * len(problems), 4.5), squeeze=False)
+    for ax, prob in zip(axes[0], problems):
+        for m, label in LABELS.items():
+            pts = sorted((r["seconds"], r["error_u"]) for r in rows
+                         if r["problem"] == prob and r["method"] == m and "failed" not in r)
+            if pts:
+                ax.loglog(*zip(*pts), "o-" if m in ("p1", "p2") else "s-", label=label)
+        for target in TARGETS:
+            ax.axhline(target, color="0.85", lw=0.8, zorder=0)
+        ax.set(title=prob, xlabel="whole-job wall time [s]", ylabel="relative L2 error of u at probes")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks accuracy", description=__doc__.splitlines()[0])
+    size = ap.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help=f"the first {QUICK} sizes per method, 1 repeat")
+    size.add_argument("--full", action="store_true", help="every size, 3 repeats")
+    ap.add_argument("--problems", default="lame,annulus,ball")
+    ap.add_argument("--methods", default="staggered,dg1,dg2,p1,p2")
+    ap.add_argument("--repeats", type=int)
+    ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per run")
+    ap.add_argument("--out", type=Path, default=Path("docs/accuracy"))
+    a = ap.parse_args(argv)
+    repeats = a.repeats or (1 if a.quick else 3 if a.full else 2)
+    methods = a.methods.split(",")
+    configs = []
+    for prob in a.problems.split(","):
+        for m in methods:
+            sizes = SIZES[prob].get(m, [])
+            configs += [(prob, m, h) for h in (sizes[:QUICK] if a.quick else sizes)]
+    runs = []
+    for r in range(repeats):
+        for prob, m, h in configs:
+            row = _one(prob, m, h, a.timeout)
+            row["repeat"] = r
+            runs.append(row)
+            brief = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()
+                     if k in ("problem", "method", "h", "seconds", "error_u", "error_vm", "iterations", "failed")}
+            print(json.dumps(brief), flush=True)
+    rows = medians(runs)
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "accuracy.json").write_text(json.dumps(
+        {"machine": platform.processor() or platform.machine(), "repeats": repeats, "medians": rows, "runs": runs},
+        indent=1, default=float))
+    plot(rows, a.out / "accuracy.png")
+    text = (f"Displacement (relative L2 at the probes), time to reach the error; in brackets: over the faster "
+            f"peer's time.\n\n{table(rows)}\n\nVon Mises stress (relative L2 at the probes):\n\n"
+            f"{table(rows, 'error_vm')}\n")
+    (a.out / "accuracy.md").write_text(text)
+    print(text)
+    return 0 if not any("failed" in r for r in rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
