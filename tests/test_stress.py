@@ -1,0 +1,206 @@
+"""The cheap cases of the numerical-stability stress suite (``benchmarks/stress.py``) as tests.
+
+    .venv/bin/python -m pytest -q tests/test_stress.py
+
+Every test runs the suite's own case functions at its quick sizes (staggered h = W / 6, DG k = 2
+at h = W / 3 on the 1 m x 0.25 m x 0.25 m cantilever) and asserts their numbers. Where the engine
+falls short today the test is a strict xfail whose reason gives the measured numbers: it starts
+failing the day the engine changes, and then the mark goes. The whole suite, with the expensive
+cases (nu = 0.4999, the full offset sweep, 10% strain on the staggered grid...), is
+``python -m benchmarks.stress``.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import stress as S
+
+SIZE = S.QUICK
+METHODS = ["staggered", "dg"]
+
+
+def assert_passed(rows: list[S.Row]) -> None:
+    for row in rows:
+        assert row.passed, (row.case, row.method, row.params, row.quantity, row.note)
+
+
+# ----------------------------------------------------------------------------- material extremes
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_youngs_modulus_from_1_to_1e9_leaves_the_strains_unchanged(method):
+    rows = S.youngs_case(method, SIZE)
+    assert_passed(rows)
+    summaries = [r for r in rows if "max_relative_difference" in r.values]
+    assert len(summaries) == 2  # scaled and fixed traction
+    for r in summaries:
+        assert r.values["max_relative_difference"] <= 1e-8, r.quantity
+    runs = [r for r in rows if "tip" in r.values]
+    assert len(runs) == 2 * len(SIZE.youngs)
+    # the condition number is scale-free: the same estimate at every E (to the estimators' 1e-3)
+    conds = np.array([r.condition for r in runs])
+    assert np.all(np.isfinite(conds)) and conds.max() <= 1.01 * conds.min(), conds
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_near_incompressibility_stays_finite_and_converged(method):
+    # measured (quick sizes): staggered tip / beam 0.935 -> 0.845, 14 -> 213 CG iterations,
+    # condition 1.7e5 -> 1.9e7 from nu 0.3 to 0.499; DG k = 2 0.975 -> 0.900, condition 3.1e6 -> 3.2e8
+    low, high = S.poisson_case(method, SIZE, 0.3), S.poisson_case(method, SIZE, 0.499)
+    assert_passed([low, high])
+    assert 0.9 < low.values["ratio"] < 1.05
+    assert 0.8 < high.values["ratio"] < low.values["ratio"]  # some locking, no collapse
+    assert high.condition > 50 * low.condition
+    if method == "staggered":
+        assert high.iterations > 5 * low.iterations  # the multigrid V-cycle degrades as lambda / mu grows
+
+
+def test_dg_at_nu_04999_is_finite_with_a_direct_solve_residual_below_1e6():
+    row = S.poisson_case("dg", SIZE, 0.4999)
+    assert_passed([row])
+    assert row.values["ratio"] > 0.85  # k = 2 does not lock (measured 0.899)
+    assert row.residual < S.DG_RESIDUAL_LIMIT and row.condition > 1e9
+
+
+# ----------------------------------------------------------------------------- cut cells
+
+
+OFFSETS = (0.0, 1e-6, 0.4, 0.99, 1 - 1e-6)  # 5 of the suite's 16: the extremes of the staggered sweep
+
+
+@pytest.mark.parametrize("method", [
+    pytest.param("staggered", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "measured tip spread 20% at h = W/6 (6.27e-3 at offset 0, 6.66e-3 at 1e-6, 7.13e-3 at 0.4, 5.83e-3 at 0.99): "
+        "the clamp holds the DOF samples inside its region, which move with the cut by up to h, and at offsets "
+        "of 1e-6 sliver samples beyond the tip face take half of the tip traction"))),
+    "dg",
+])
+def test_sub_cell_offsets_change_the_tip_by_less_than_5_percent(method):
+    rows = S.offsets_case(method, SIZE, OFFSETS)
+    runs, summary = rows[:-1], rows[-1]
+    assert len(runs) == len(OFFSETS)
+    assert all(r.passed for r in runs), [(r.params, r.note) for r in runs if not r.passed]  # finite, converged
+    assert summary.values["spread"] < 0.05, summary.quantity
+    assert summary.passed
+
+
+@pytest.mark.parametrize("method, placement", [
+    pytest.param("staggered", "inside", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "a wall thinner than a cell inside one cell layer has no transverse stiffness: the shear terms "
+        "coupling it to its in-plane DOFs need samples in the empty neighbour layers and are pruned, so "
+        "K has a 957-dimensional null space and the coarse LU raises 'RuntimeError: Factor is exactly singular' "
+        "(multigrid.py CoarseSolver), not a named error"))),
+    ("staggered", "across"),
+    ("dg", "inside"),
+])
+def test_thin_walled_box_with_walls_of_03_h(method, placement):
+    row = S.thin_wall_case(method, SIZE, placement)
+    assert_passed([row])
+    # thin-walled beam theory (bending + web shear); measured 1.045 staggered across, 1.052 DG inside
+    assert 0.9 < row.values["ratio"] < 1.15, row.quantity
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_bar_rotated_off_the_axes_bends_like_the_aligned_bar(method):
+    aligned, rotated = S.rotated_case(method, SIZE)
+    assert_passed([aligned, rotated])
+    # measured rotated / aligned 0.9925 staggered (staircase clamp), 1.0010 DG; tip / beam 0.97-0.99
+    assert abs(rotated.values["rotated_over_aligned"] - 1) < 0.02
+    assert 0.95 < aligned.values["ratio"] < 1.02
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_plate_with_a_through_hole(method):
+    row = S.hole_case(method, SIZE)
+    assert_passed([row])
+    # the hole softens the plate: measured end / (T L / E) 1.214 staggered, 1.196 DG; sxx / T 2.8-3.1
+    assert 1.1 < row.values["ratio"] < 1.3
+    assert 2.0 < row.values["max_sxx_over_T"] < 4.0
+
+
+# ----------------------------------------------------------------------------- large strain, time steps
+
+
+def test_ten_percent_strain_linear_and_corotated():
+    linear, corotated = S.large_strain_case("dg", SIZE)
+    assert_passed([linear, corotated])
+    assert linear.values["max_strain"] > 0.05  # cell centres sit half a cell inside the 10% fibre
+    # the rotations' fixed point settles and the dead load then bends less than the linear model
+    # (measured tip / elastica 1.025 corotated, 1.092 linear; 12 fixed-point iterations)
+    assert corotated.iterations < 30
+    assert 0.97 < corotated.values["tip"] / corotated.values["elastica"] < 1.06
+    assert corotated.values["tip"] < 0.97 * linear.values["tip"]
+    staggered = S.large_strain_case("staggered", SIZE)
+    assert_passed(staggered)
+    assert staggered[1].values["error"].startswith("MethodUnavailableError: material.model:")
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_backward_euler_steps_from_1e5_to_1_s_stay_bounded(method):
+    size = dataclasses.replace(SIZE, time_steps=(1e-5, 1.0), steps=3)  # the suite adds 1e-3 and 0.1 s, 4 steps
+    rows = S.dynamic_case(method, size)
+    assert_passed(rows)
+    steps = {r.params.split()[0]: r.values for r in rows[1:]}
+    assert set(steps) == {"dt=1e-05", "dt=1"}
+    for v in steps.values():
+        assert -1e-9 <= v["ratio_min"] and v["ratio_max"] <= 2.0  # dissipative: within 2x the static tip
+    assert steps["dt=1e-05"]["ratio_max"] < 1e-4  # 4e-5 s after the load: barely moved
+    assert abs(steps["dt=1"]["ratio_last"] - 1) < 0.02  # dt >> period: the static solution
+
+
+# ----------------------------------------------------------------------------- free bodies
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_balanced_free_body_is_solved_off_the_rigid_modes_with_a_warning(method):
+    row = S.free_body_run(method, SIZE, rotated=False, balanced=True)
+    assert_passed([row])
+    assert row.values["warned"]
+    assert math.isnan(row.condition)  # n/a: the rigid modes are bordered out / projected off
+    assert abs(row.values["ratio"] - 1) < 1e-3  # uniform stress T: the stretch is T L / E
+
+
+@pytest.mark.parametrize("method", [
+    pytest.param("staggered", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "balanced end tractions on the rotated bar raise UnbalancedLoadError (net force 0, net torque "
+        "[-1.1e-3, 2.2e-4, -9.3e-5] N m of 18.98 N total load): surface loads are spread to the active samples "
+        "with renormalised weights, which moves their points of application at cut cells"))),
+    "dg",
+])
+def test_balanced_loads_on_a_rotated_free_body_are_accepted(method):
+    row = S.free_body_run(method, SIZE, rotated=True, balanced=True)
+    assert_passed([row])
+    assert row.values["warned"] and abs(row.values["ratio"] - 1) < 1e-3
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_unbalanced_loads_on_a_free_body_are_a_named_error_never_a_nan(method):
+    from engine.solvers.rigid import UnbalancedLoadError
+
+    row = S.free_body_run(method, SIZE, rotated=True, balanced=False)
+    assert_passed([row])
+    assert row.values["error"].startswith(f"{UnbalancedLoadError.__name__}: boundaries:")
+    assert "do not balance" in row.values["error"] and "net force" in row.values["error"]
+
+
+# ----------------------------------------------------------------------------- regions on faces
+
+
+@pytest.mark.parametrize("setup", [
+    pytest.param("aligned", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "DG: the sliced end face lies on the grid plane origin + i h (x = 1.9999999999999998, "
+        "-1e-17 at the clamp) instead of the mesh's x = 2 / 0, so the closed region at the face selects nothing: "
+        "'clamp: the region selects no surface'"))),
+    pytest.param("offset", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "DG: sliced boundary triangles come 2.5e-14 / 5e-14 m inside the mesh's end face, and the exact "
+        "half-space clip drops their share: 39% of the tip traction is lost (tip 0.61 of the slack run)"))),
+    pytest.param("rotated", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "DG: the rotated end face's vertices lie 1e-17 m on either side of the clamp plane; the exact clip keeps "
+        "part of the Dirichlet patch only and the tip deflects 46% more than with the slack region"))),
+])
+def test_dg_regions_exactly_on_a_face_select_the_whole_face(setup):
+    row = S.exact_faces_run("dg", SIZE, setup)
+    assert_passed([row])
