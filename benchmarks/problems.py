@@ -85,7 +85,7 @@ class Problem:
                                          stress={"outer": self.stress})
         spec = {**base, "geometry": {"mesh": "ball.stl"},
                 "boundaries": [{"kind": "displacement", "name": "surface", "value": [0, 0, 0], "region": {"all": True}}]}
-        return spec, _ball(), Functions(body_force=self.body_force, displacement={"surface": self.exact})
+        return spec, _ball_mesh(), Functions(body_force=self.body_force, displacement={"surface": self.exact})
 
 
 def von_mises_of(sigma: np.ndarray, nu_plane: float = 0.0) -> np.ndarray:
@@ -117,7 +117,7 @@ def _shell():
 
 
 @lru_cache(maxsize=None)
-def _ball():
+def _ball_mesh():
     import trimesh
 
     return trimesh.creation.icosphere(subdivisions=6, radius=1.0)
@@ -187,7 +187,7 @@ def _annulus() -> Problem:
                    body_force=lambda x: 2 * two_pi**2 * exact(x), radii=(0.325, 0.8))
 
 
-def _ball() -> Problem:
+def _ball_problem() -> Problem:
     E, nu, amp = 1.0, 0.3, 0.01
     lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
 
@@ -222,7 +222,7 @@ def _ball() -> Problem:
 @lru_cache(maxsize=None)
 def problem(name: str) -> Problem:
     """The named problem: "lame", "annulus" or "ball"."""
-    makers = {"lame": _lame, "annulus": _annulus, "ball": _ball}
+    makers = {"lame": _lame, "annulus": _annulus, "ball": _ball_problem}
     if name not in makers:
         raise KeyError(f"problem: one of {sorted(makers)}, got {name!r}")
     return makers[name]()
