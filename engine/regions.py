@@ -8,7 +8,9 @@ Hodgman, one plane at a time). A ball is not polyhedral: its clipping subdivides
 piece is provably inside or outside, or smaller than ``tolerance``, and then decides a piece by its
 centroid; the area it can misassign is bounded by ``tolerance`` times the length of the patch rim.
 Membership is closed: points on the boundary are inside (a fixed face lying exactly on a box face
-is selected).
+is selected). Clipping by planes is closed to within a round-off tolerance: surfaces that come out of
+hex slicing sit up to ~1e-13 relative off the mesh's own planes, and a face that a user put exactly
+on a region's plane must still be selected whole.
 """
 
 from __future__ import annotations
@@ -18,6 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import VoxelasticError
+
+
+ROUNDOFF = 1e-10  # relative: slicing round-off is ~1e-14, real geometry (>= 1e-6 of a cell) is far above
 
 
 @dataclass(frozen=True)
@@ -38,15 +43,20 @@ class Halfspaces:
 
     def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Exact parts of facets [N, d, d] (triangles / segments) inside: (pieces [M, d, d], source
-        facet index [M]). Clipped triangles are fan-triangulated; orientation is kept."""
+        facet index [M]). Clipped triangles are fan-triangulated; orientation is kept. Vertices within
+        ``tolerance`` [m] of a plane count as on it (default ``ROUNDOFF`` times the largest coordinate
+        or offset), so nothing is cut off or dropped by round-off alone."""
         facets = np.asarray(facets, dtype=float)
         d = facets.shape[-1]
+        if tolerance is None:
+            scale = max(np.abs(facets).max(initial=0.0), np.abs(self.offsets).max(initial=0.0))
+            tolerance = ROUNDOFF * max(scale, np.finfo(float).tiny)
         poly = [facets[i] for i in range(len(facets))]
         source = list(range(len(facets)))
         for n, c in zip(self.normals, self.offsets):
             kept_poly, kept_source = [], []
             for p, s in zip(poly, source):
-                q = _clip_polygon(p, n, c) if d == 3 else _clip_segment(p, n, c)
+                q = _clip_polygon(p, n, c, tolerance) if d == 3 else _clip_segment(p, n, c, tolerance)
                 if q is not None:
                     kept_poly.append(q)
                     kept_source.append(s)
@@ -127,9 +137,15 @@ def require_selection(count: int, what: str, name: str) -> None:
         )
 
 
-def _clip_polygon(p: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray | None:
-    """Planar polygon p [k, 3] cut to normal . x <= offset (None when nothing is left)."""
+def _side(p: np.ndarray, normal: np.ndarray, offset: float, tolerance: float) -> np.ndarray:
+    """Signed distances [k] of points p [k, d] to the plane, snapped to 0 within ``tolerance``."""
     side = p @ normal - offset
+    return np.where(np.abs(side) <= tolerance, 0.0, side)
+
+
+def _clip_polygon(p: np.ndarray, normal: np.ndarray, offset: float, tolerance: float) -> np.ndarray | None:
+    """Planar polygon p [k, 3] cut to normal . x <= offset (None when nothing is left)."""
+    side = _side(p, normal, offset, tolerance)
     if np.all(side <= 0):
         return p
     if np.all(side > 0):
@@ -144,8 +160,8 @@ def _clip_polygon(p: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarra
     return np.array(out) if len(out) >= 3 else None
 
 
-def _clip_segment(p: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray | None:
-    sa, sb = p @ normal - offset
+def _clip_segment(p: np.ndarray, normal: np.ndarray, offset: float, tolerance: float) -> np.ndarray | None:
+    sa, sb = _side(p, normal, offset, tolerance)
     if sa <= 0 and sb <= 0:
         return p
     if sa > 0 and sb > 0:

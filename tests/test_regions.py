@@ -61,6 +61,20 @@ def test_thin_end_box_selects_the_end_face_and_its_strips():
     assert abs(area - (0.04 + 4 * 0.2 * 0.001)) < 1e-14
 
 
+def test_faces_off_a_plane_by_round_off_are_selected_whole():
+    # hex slicing leaves the end face of a bar 1e-14 relative off the mesh's plane, either side
+    bar = trimesh.creation.box(bounds=[[0, -0.1, -0.1], [2, 0.1, 0.1]]).triangles
+    jitter = np.random.default_rng(0).uniform(-5e-14, 5e-14, bar.shape)
+    (end,) = regions_of({"box": [[2.0, -1, -1], [3, 1, 1]]})
+    (half,) = regions_of({"halfspace": {"point": [2.0, 0, 0], "normal": [-1, 0, 0]}})
+    for region in (end, half):
+        pieces, _ = region.clip(bar + jitter)
+        assert abs(np.linalg.norm(area_vectors(pieces), axis=1).sum() - 0.04) < 1e-12
+    # an explicit zero tolerance is the exact clip, which loses part of the face
+    pieces, _ = end.clip(bar + jitter, tolerance=0.0)
+    assert np.linalg.norm(area_vectors(pieces), axis=1).sum() < 0.04 - 1e-3
+
+
 def test_ball_clipping_error_is_bounded_by_tolerance_times_rim():
     plate = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
     ball = Ball(np.zeros(3), 0.5)
