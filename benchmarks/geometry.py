@@ -81,12 +81,14 @@ def _slicing(name: str, resolution: int, workers: int | None, queue) -> None:
     queue.put(out)
 
 
-def run_isolated(target, *args) -> dict:
+def run_isolated(target, *args, timeout: float | None = None) -> dict:
     """``target(*args, queue)`` in a fresh spawned process; its result. A child that dies without
-    one (an exception, the OOM killer) raises instead of leaving the benchmark waiting forever."""
+    one (an exception, the OOM killer) raises instead of leaving the benchmark waiting forever;
+    one still working after ``timeout`` seconds (None: no limit) is killed and TimeoutError raised."""
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     p = ctx.Process(target=target, args=(*args, queue))
+    start = time.perf_counter()
     p.start()
     while True:
         try:
@@ -96,6 +98,10 @@ def run_isolated(target, *args) -> dict:
             if not p.is_alive() and queue.empty():
                 raise RuntimeError(f"{getattr(target, '__name__', target)}: the benchmark process ended with exit code "
                                    f"{p.exitcode} and no result (its error is printed above)") from None
+            if timeout is not None and time.perf_counter() - start > timeout:
+                p.kill()
+                p.join()
+                raise TimeoutError(f"{getattr(target, '__name__', target)}: no result after {timeout:g} s") from None
     p.join()
     return out
 
