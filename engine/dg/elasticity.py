@@ -158,8 +158,7 @@ class DGElasticity:
             if callable(self.body_force):
                 rule = self.volume_rule()
                 b = np.asarray(self.body_force(rule.points), dtype=float).reshape(-1, 3)
-                psi = basis.values(rule.element, rule.xi)
-                np.add.at(f, rule.element, np.einsum("q,qp,qi->qpi", rule.weights, b, psi))
+                f += basis.tested(el.count, rule.element, rule.xi, rule.weights[:, None] * b)
             else:
                 g = np.asarray(self.body_force, dtype=float).reshape(3)
                 mean = basis.h**3 * np.einsum("eis,es->ei", basis.T, el.moments[:, :n])  # int psi_I dV
@@ -169,8 +168,7 @@ class DGElasticity:
             require_selection(len(clipped), "surface", load.name)
             sp_ = surface_points(clipped, el.boundary_element[source], self.degree + 3)
             t = _tractions(load, sp_.points, sp_.normals)
-            psi = basis.values(sp_.element, self._xi(sp_.element, sp_.points))
-            np.add.at(f, sp_.element, np.einsum("q,qp,qi->qpi", sp_.weights, t, psi))
+            f += basis.tested(el.count, sp_.element, self._xi(sp_.element, sp_.points), sp_.weights[:, None] * t)
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
@@ -214,24 +212,20 @@ class DGElasticity:
             x = sp_.points
             gc = (np.einsum("qba,qb->qa", rotations[sp_.element], x + g) - x) * mask
         nrm, w = sp_.normals, sp_.weights
-        psi = basis.values(sp_.element, self._xi(sp_.element, sp_.points))  # [Q, n]
-        grad = basis.gradients(sp_.element, self._xi(sp_.element, sp_.points))  # [Q, 3, n]
+        xi = self._xi(sp_.element, sp_.points)
         mu, lam = self.mu, self.lam
-        # g . sigma(psi_I e_p) n = mu (g_p d_n psi_I + n_p g . grad psi_I) + lam (g . n) d_p psi_I
-        dn = np.einsum("qa,qai->qi", nrm, grad)
-        gn_c = np.einsum("qa,qa->q", gc, nrm)
-        gdpsi = np.einsum("qa,qai->qi", gc, grad)
-        cons = (mu * (gc[:, :, None] * dn[:, None, :] + nrm[:, :, None] * gdpsi[:, None, :])
-                + lam * gn_c[:, None, None] * grad)  # [Q, p, I]
-        if self.flux != "ip":
-            cons = 0.0 * cons
-        elif rotations is not None:
-            cons = np.einsum("qps,qsi->qpi", rotations[sp_.element], cons)
         gn = np.einsum("qa,qa->q", g, nrm)
-        pen = eta_b[patch][:, None, None] * mask[:, :, None] * (
-            mu * g[:, :, None] + (mu + lam) * (gn[:, None] * nrm)[:, :, None]) * psi[:, None, :]
-        np.add.at(out, sp_.element, w[:, None, None] * (pen - cons))
-        return out
+        pen = eta_b[patch][:, None] * mask * (mu * g + (mu + lam) * gn[:, None] * nrm)  # [Q, p]
+        out += basis.tested(el.count, sp_.element, xi, w[:, None] * pen)
+        if self.flux != "ip":
+            return out
+        # g . sigma(psi_I e_p) n = sum_a V_pa d_a psi_I, V_pa = mu (g_p n_a + n_p g_a) + lam (g . n) delta_pa
+        gn_c = np.einsum("qa,qa->q", gc, nrm)
+        V = mu * (gc[:, :, None] * nrm[:, None, :] + nrm[:, :, None] * gc[:, None, :]) + lam * gn_c[:, None, None] * np.eye(3)
+        cons = basis.tested(el.count, sp_.element, xi, w[:, None, None] * V, gradient=True)  # [E, p, I]
+        if rotations is not None:  # one rotation per element: it commutes with the sum over its points
+            cons = np.einsum("eps,esi->epi", rotations, cons)
+        return out - cons
 
     def _free_modes(self) -> list:
         """Per body, the rigid modes the Dirichlet patches leave free: (elements, basis [E_b*3*n, k])."""

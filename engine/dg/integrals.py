@@ -12,10 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..geometry.moments import area_terms, cell_moments, triangle_rule
 from . import basis as B
 from .elements import Elements
+
+
+_CHUNK = 2**16  # quadrature points per block in ``Basis.tested`` (bounded scratch memory)
 
 
 @dataclass
@@ -40,6 +44,30 @@ class Basis:
         mono = B.monomials(xi, self.degree)
         D = B.derivative(self.degree)  # [3, s, t]
         return np.einsum("nt,ast,nis->nai", mono, D, self.T[element]) / self.h
+
+    def tested(self, count: int, element: np.ndarray, xi: np.ndarray, values: np.ndarray,
+               gradient: bool = False) -> np.ndarray:
+        """Per-element sums over quadrature points of values times the basis: [count, P, n] with
+        out[e, p, I] = sum_q values[q, p] psi_I(xi_q) (values [Q, P], weights included) or, with
+        ``gradient``, sum_q values[q, p, a] d_a psi_I(xi_q) (values [Q, P, 3]). Sums monomials per
+        element first and applies T once per element: gathering T per point (``values``) costs
+        n^2 per point and dominates surface-load assembly on fine meshes."""
+        values = np.asarray(values, dtype=float)
+        P, s = values.shape[1], self.size
+        acc = np.zeros((count, P * s))
+        if gradient:
+            D = B.derivative(self.degree) / self.h  # [3, s, t]
+        for q0 in range(0, len(element), _CHUNK):
+            q = slice(q0, q0 + _CHUNK)
+            mono = B.monomials(xi[q], self.degree)  # [Q, s]
+            if gradient:  # d_a m_s = sum_t D[a, s, t] m_t
+                test = np.einsum("qpa,ast,qt->qps", values[q], D, mono)
+            else:
+                test = values[q][:, :, None] * mono[:, None, :]
+            rows = element[q]
+            acc += sp.csr_matrix((np.ones(len(rows)), (rows, np.arange(len(rows)))),
+                                 shape=(count, len(rows))) @ test.reshape(len(rows), P * s)
+        return np.einsum("eis,eps->epi", self.T, acc.reshape(count, P, s))
 
 
 def make_basis(el: Elements, degree: int) -> Basis:
