@@ -18,7 +18,9 @@ clamped at x = 0 and loaded by a traction on its far end face.
 - ``offsets``: the cantilever translated by 16 sub-cell offsets (down to 1e-6 of a cell) on a
   pinned grid; the tip deflection must vary by < 5%.
 - ``thin_wall``: a closed hollow box with walls 0.3 h thick, each wall inside one cell layer or
-  across a grid plane, clamped at its base, pushed sideways; over thin-walled beam theory.
+  across a grid plane, clamped at its base, pushed sideways; over thin-walled beam theory. The
+  staggered grid has one sample across a wall inside a cell layer and nothing resists its
+  transverse motion: that run must stop with ``ThinFeatureError`` (a solved job fails the row).
 - ``rotated_bar``: a 2 m bar rotated off the grid axes vs the same bar along x and beam theory.
 - ``large_strain``: bending to 10% surface strain, linear and corotated, vs the elastica.
 - ``dynamic``: backward-Euler steps of 1e-5 s to 1 s after a sudden tip load, vs the static tip.
@@ -829,6 +831,12 @@ def thin_wall_case(method: str, size: Size, placement: str) -> Row:
         row.quantity = f"top/beam={top / beam:.3f}"
         judge(row, s)
 
+    if method == "staggered" and placement == "inside":
+        # one sample across each wall: nothing resists its transverse motion (957 zero-energy
+        # motions at h = W/6, all found); the job must stop with the error that says so
+        from engine.errors import ThinFeatureError
+
+        return guarded(row, body, expect=ThinFeatureError, match="thinner than a grid cell")
     return guarded(row, body)
 
 

@@ -23,3 +23,8 @@ class MethodUnavailableError(VoxelasticError):
 
 class BoundaryError(VoxelasticError):
     """A boundary condition or load that cannot be applied (names the boundary and why)."""
+
+
+class ThinFeatureError(VoxelasticError):
+    """Material thinner than a grid cell leaves displacement samples that nothing holds (a
+    singular stiffness matrix); the message counts them, says where, and what to change."""

@@ -459,3 +459,125 @@ def _full(mask, values):
     out = np.zeros(len(mask))
     out[mask] = values
     return out
+
+
+# --- g. thin features ------------------------------------------------------------------------------
+
+
+def thin_walled_box(start, h=1 / 16):
+    """The stress suite's hollow box, 6 h + 0.3 h wide and 8 h + 0.3 h tall, walls 0.3 h thick, on a
+    pinned grid: walls inside one cell layer (``start`` 0.35: 0.35 h .. 0.65 h of it) or across a
+    grid plane (0.85); base clamped (z < 0.6 h). Returns (level, fractions)."""
+    from benchmarks.stress import hollow_box
+    from engine.grid import Grid
+
+    t = 0.3 * h
+    mesh = hollow_box((6 * h + t, 6 * h + t, 8 * h + t), t)
+    grid = Grid(origin=(-(1 + start) * h,) * 3, spacing=h, shape=(10, 10, 12))
+    fr = volume_fractions(surface_of(mesh), grid)
+    return clamped(3, fr, 0.6 * h), fr
+
+
+def free_stiffness(lev):
+    """Dense reference K on the level's free DOFs, and those DOFs' (component, position)."""
+    ref = Reference.of_level(lev)
+    free = ref.from_layout(lev.free.astype(float), ref.act).astype(bool)
+    return ref.K[free][:, free].toarray(), ref.comp[free], ref.pos[free]
+
+
+@pytest.mark.parametrize("start, motions", [(0.35, 101), (0.85, 0)])
+def test_walls_inside_one_cell_layer_leave_exactly_the_motions_found(start, motions):
+    """Walls 0.3 h thick inside one cell layer: one sample across each wall, the shear terms tying
+    its transverse motion to the in-plane samples reach empty layers and are pruned, so K on the
+    free DOFs is singular. unheld_groups finds every zero-energy motion (the dense spectrum: 101
+    eigenvalues below 1e-12 of the largest, the next 2.2e-4 of it) and each is annihilated by the
+    matrix-free operator; the same walls across a grid plane have two samples across and none."""
+    from engine.staggered.operator import unheld_groups
+
+    lev, _ = thin_walled_box(start)
+    mech = unheld_groups(lev)
+    K, comp, pos = free_stiffness(lev)
+    w = np.linalg.eigvalsh(K)
+    assert mech.count == motions == int(np.sum(w < 1e-12 * w[-1]))
+    assert w[motions] > 1e-5 * w[-1]  # the rest of the spectrum is well away from zero
+    if not motions:
+        return
+    assert mech.fill == pytest.approx(0.3)  # the walls fill 30% of their cells
+    # the motions are null vectors of Level.apply, independent (disjoint), and span K's null space
+    x = np.zeros((3, lev.size))
+    x[mech.comp, mech.pos] = mech.sign * (mech.group + 1.0)  # all at once, each scaled differently
+    assert np.abs(apply(lev, x)).max() <= 1e-13 * np.abs(K).max() * np.abs(x).max()
+    key = {(c, p): k for k, (c, p) in enumerate(zip(comp, pos))}
+    V = np.zeros((len(comp), mech.count))
+    V[[key[(c, p)] for c, p in zip(mech.comp, mech.pos)], mech.group] = mech.sign
+    assert np.linalg.matrix_rank(V) == motions
+    null = np.linalg.eigh(K)[1][:, :motions]
+    q, _ = np.linalg.qr(V)
+    assert np.linalg.svd(q.T @ null, compute_uv=False).min() > 1 - 1e-9
+
+
+def test_thin_walls_stop_the_setup_with_a_named_error():
+    from engine.errors import ThinFeatureError
+
+    lev, _ = thin_walled_box(0.35)
+    with pytest.raises(ThinFeatureError) as info:
+        Multigrid(lev)
+    message = str(info.value)
+    assert message.startswith("grid.cell_size: 101 independent motion(s) of displacement samples")
+    assert "thinner than a grid cell (h = 0.0625 m)" in message and "at most 30% of their cells" in message
+    assert "about 0.0188 m" in message and "method.kind 'dg'" in message
+    # where: between the sample positions [m] of the moving samples, inside the box's walls
+    lo, hi = (np.array([float(v) for v in part.split(")")[0].split(", ")])
+              for part in message.split("lie between (")[1].split(" and (")[:2])
+    assert np.all(lo >= -0.0625) and np.all(hi <= 0.0625 * 8.3 + 0.0625)
+
+
+def finned_block(h=1 / 16):
+    """A 1 x 0.5 x 0.5 block with a fin 0.8 h thick (1 x 0.8 h x 0.65) across the fine grid plane
+    y = 7 h, inside the coarse layer [6 h, 8 h]; clamped below z = 0.06."""
+    from engine.grid import Grid
+
+    t = 0.8 * h
+    block = trimesh.creation.box(bounds=[[0, 0, 0], [1, 0.5, 0.5]])
+    fin = trimesh.creation.box(bounds=[[0, 7 * h - t / 2, 0.25], [1, 7 * h + t / 2, 0.9]])
+    mesh = block.union(fin, engine="manifold")
+    grid = Grid(origin=(-2 * h,) * 3, spacing=h, shape=(20, 12, 19))
+    fr = volume_fractions(surface_of(mesh), grid)
+    return clamped(3, fr, 0.06), fr
+
+
+def test_thin_motions_of_a_coarse_level_are_bordered_in_its_direct_solve(rng, monkeypatch):
+    """A fin the fine grid resolves (two samples across) but the averaged 2h fractions do not: the
+    coarsest level has 24 zero-energy motions. Its sparse LU used to fail ('Factor is exactly
+    singular', an unnamed RuntimeError on a valid job); bordered with them it is regular and the
+    V-cycle preconditions CG to the reference solution (45 iterations measured)."""
+    from engine.solvers.cg import SolverError
+    from engine.staggered.operator import Mechanisms, unheld_groups
+
+    lev, fr = finned_block()
+    assert unheld_groups(lev).count == 0
+    mg = Multigrid(lev)
+    coarse = mg.levels[1]
+    assert len(mg.levels) == 2 and mg.coarse.mechanisms == unheld_groups(coarse).count == 24
+    w = np.linalg.eigvalsh(free_stiffness(coarse)[0])
+    assert int(np.sum(w < 1e-12 * w[-1])) == 24  # all of the coarse operator's null space
+    assert solve_and_compare(lev, fr, rng, levels=2) <= 80
+    # without the bordering the coarse factorisation is singular: a named error, not a RuntimeError
+    none = np.zeros(0, dtype=np.int64)
+    monkeypatch.setattr(multigrid, "unheld_groups", lambda level: Mechanisms(none, none, none, none, 0, 0.0))
+    with pytest.raises(SolverError, match=r"coarsest multigrid level \(488 unknowns .* is singular") as info:
+        Multigrid(lev)
+    assert info.value.reason == "singular"
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_whole_array_shift_matches_the_layout_lookup(d, rng):
+    from engine.staggered.operator import _shift_up
+
+    lev = make_fine_level(FRACTIONS[d](), LAM, MU)
+    lay = lev.layout
+    v = rng.random(lev.size)
+    v[-lay.tile_size:] = 0.0  # the zero tile reads zero
+    pos = np.arange(lay.count * lay.tile_size)
+    for axis in range(d):
+        assert np.array_equal(_shift_up(lay, v, axis)[: len(pos)], v[lay.shifted(pos, axis, 1)])

@@ -224,7 +224,9 @@ def prune_edges(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.nda
                 active: ti.types.ndarray(), ve: ti.types.ndarray()):
     """Zero the edge weights whose shear stencil reaches an inactive face: such a face would be
     an unknown held by nothing else, free to cancel the shear (a zero-energy mechanism), so the
-    term adds no stiffness and only makes the operator singular."""
+    term adds no stiffness and only makes the operator singular. A wall thinner than a cell inside
+    one cell layer loses every shear term of its transverse samples this way and is then held by
+    nothing across: ``operator.unheld_groups`` finds those motions and the setup names them."""
     nt = coords.shape[0]
     for t, l in ti.ndrange(nt, B**d):
         I = index_of(d, coords, t, l)

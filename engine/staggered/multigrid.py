@@ -19,9 +19,12 @@ import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..errors import ThinFeatureError
+from ..solvers.cg import SolverError
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
-from .operator import Level, device_array, dof_bodies, make_coarse_level, pairs
+from .operator import (Level, Mechanisms, describe_thin_features, device_array, dof_bodies, make_coarse_level, pairs,
+                       unheld_groups)
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -79,8 +82,14 @@ class Multigrid:
         self.update()
 
     def update(self) -> None:
-        """Propagate the fine level's prescribed DOFs and shift to the coarse levels; refactor."""
+        """Propagate the fine level's prescribed DOFs and shift to the coarse levels; refactor.
+        Raises ThinFeatureError when the fine stiffness (no shift) has zero-energy motions that
+        are not rigid motions: thin features the grid cannot hold (see ``unheld_groups``)."""
         fine = self.levels[0]
+        if fine.shift == 0.0:
+            mech = unheld_groups(fine)
+            if mech.count:
+                raise ThinFeatureError(describe_thin_features(fine, mech))
         for k in range(1, len(self.levels)):
             lv, up = self.levels[k], self.levels[k - 1]
             d = lv.dim
@@ -196,8 +205,10 @@ def _largest_eigenvalue(level: Level, v) -> float:
 
 class CoarseSolver:
     """Sparse LU of the coarsest operator on its free DOFs. Bodies whose rigid modes the coarse
-    Dirichlet DOFs leave free (and no mass term) are bordered with those modes, which makes the
-    system regular and returns the solution orthogonal to them."""
+    Dirichlet DOFs leave free (and no mass term) are bordered with those modes, and so are the
+    zero-energy motions of thin features the averaged coarse fractions make (``unheld_groups``; the
+    fine level has none, or the setup stopped): the bordered system is regular and returns the
+    solution orthogonal to them, which the finer levels' smoothing corrects."""
 
     def __init__(self, level: Level) -> None:
         self.level = level
@@ -221,10 +232,26 @@ class CoarseSolver:
             A = A + sp.diags(level.shift * level.mass.to_numpy()[self.comp, self.pos])
         n = A.shape[0]
         self.n = n
-        border = self._floating_modes(level, comp, flat_pos, idx, free) if level.shift == 0.0 else None
+        self.mechanisms = 0
+        border = None
+        if level.shift == 0.0:
+            border = self._floating_modes(level, comp, flat_pos, idx, free)
+            mech = unheld_groups(level)
+            if mech.count:
+                self.mechanisms = mech.count
+                border = _with_mechanisms(border, mech, self.comp, self.pos, level.size)
         if border is not None and border.shape[1]:
             A = sp.bmat([[A, sp.csr_matrix(border)], [sp.csr_matrix(border.T), None]])
-        self.lu = spla.splu(A.tocsc()) if A.shape[0] else None
+        try:
+            self.lu = spla.splu(A.tocsc()) if A.shape[0] else None
+        except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
+            raise SolverError(
+                f"solver: the operator of the coarsest multigrid level ({n} unknowns at spacing "
+                f"{level.spacing:.4g} m) is singular beyond its rigid modes and {self.mechanisms} thin-feature "
+                f"motion(s) ({exc}): some displacement samples are held by nothing; refine the grid around thin "
+                "walls or rods, or use method.kind 'dg'",
+                "singular",
+            ) from None
 
     @staticmethod
     def _floating_modes(level: Level, comp, flat_pos, idx, free) -> np.ndarray:
@@ -253,3 +280,22 @@ class CoarseSolver:
             rhs[: self.n] = b.to_numpy()[self.comp, self.pos]
             out[self.comp, self.pos] = self.lu.solve(rhs)[: self.n]
         x.from_numpy(out.astype(lv.dtype, copy=False))
+
+
+def _with_mechanisms(border: np.ndarray, mech: Mechanisms, comp: np.ndarray, pos: np.ndarray, size: int) -> np.ndarray:
+    """``border`` [n, k] (rigid modes on the free DOFs (comp [n], pos [n])) with the motions of
+    ``mech`` appended as orthonormal columns; rigid columns that the motions span are dropped (a
+    floating thin feature's translation is one of its motions), the rest re-orthonormalised."""
+    n = len(comp)
+    order = np.argsort(comp * size + pos)
+    keys = (comp * size + pos)[order]
+    at = order[np.searchsorted(keys, mech.comp * size + mech.pos)]  # free DOF number of each moving sample
+    sizes = np.bincount(mech.group, minlength=mech.count)
+    motions = np.zeros((n, mech.count))
+    motions[at, mech.group] = mech.sign / np.sqrt(sizes[mech.group])
+    if border is None or not border.shape[1]:
+        return motions
+    rest = border - motions @ (motions.T @ border)
+    # an orthonormal basis of what the motions leave of the (orthonormal) rigid columns
+    u, s, _ = np.linalg.svd(rest, full_matrices=False)
+    return np.concatenate([motions, u[:, s > 1e-8]], axis=1)

@@ -13,11 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.ndimage as ndi
+import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
 import taichi as ti
 
 from ..geometry.fractions import VolumeFractions
 from . import kernels
-from .layout import TileLayout, dilate, make_layout, reorder
+from .layout import TILE, TileLayout, dilate, make_layout, reorder
 
 
 MIN_FRACTION = 1e-3
@@ -105,6 +107,7 @@ class Level:
         self.se = ti.ndarray(dtype=taichi_float(self.dtype), shape=(len(pairs(d)), size))
         self.shift, self.density = 0.0, 0.0
         self.slivers = 0  # control volumes whose weight was raised to MIN_FRACTION
+        self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
         self.set_free(self.active)
 
@@ -201,6 +204,200 @@ class Level:
             self.mask = saved
 
 
+# A run touching more kept shear edges than this is taken as held by its neighbours (see
+# unheld_groups): the thin-wall mechanisms touch none (inside a wall) or one (beside a corner).
+WEAK_EDGES = 2
+
+
+@dataclass(frozen=True)
+class Mechanisms:
+    """Zero-energy motions of a level (see :func:`unheld_groups`): DOF k is component ``comp[k]``
+    at flat position ``pos[k]``, moves by ``sign[k]`` (+1 or -1) in the motion ``group[k]``
+    (0 .. count - 1); ``fill``: the largest cell fraction between the moving samples (how much of
+    a cell the thin feature fills)."""
+
+    comp: np.ndarray
+    pos: np.ndarray
+    group: np.ndarray
+    sign: np.ndarray
+    count: int
+    fill: float
+
+
+def unheld_groups(level: Level) -> Mechanisms:
+    """Zero-energy motions of a level's free DOFs that thin features leave (not rigid motions).
+
+    With mu > 0 a motion of zero energy has no normal strain in any material cell, so u_a is
+    constant along each *run*: the a-face samples along axis a linked through material cells (the
+    cells beyond a run's ends hold none). K's null space is therefore spanned by run translations
+    t_r that make every kept shear term vanish: (a, b) at I reads t(a, I) - t(a, I - e_b) +
+    t(b, I) - t(b, I - e_a). A wall or rod thinner than a cell that lies inside one cell layer has
+    one sample across its thickness; the shear terms that would tie its transverse runs (two faces
+    each) to its in-plane samples reach empty layers and are pruned, so those runs touch no kept
+    shear term (or, beside a corner, one term shared with a run of the other wall).
+
+    Found here: runs of free samples touching at most WEAK_EDGES kept shear terms in all; a term
+    with exactly two such runs ties them (t_2 = +-t_1), one with one holds it, one with more holds
+    them all (conservative), and every other run is taken as held. Each connected, consistently
+    signed set of tied runs that nothing holds is an exact null vector of K (every term it touches
+    vanishes), and the sets are disjoint: ``count`` is a lower bound of the null space's dimension
+    beyond rigid motions, exact for the thin walls and rods described above. Cost: elementwise over
+    the level's positions, graph work only on the weak runs (none in a part without thin features)."""
+    d, lay = level.dim, level.layout
+    n = lay.count * lay.tile_size
+    vc, ve, free = level.vc_host, level.ve_host, level.free
+    shear_of = {a: [(q, b if p0 == a else p0) for q, (p0, b) in enumerate(pairs(d)) if a in (p0, b)] for a in range(d)}
+    comps, poss, runs = [], [], []
+    total = 0
+    for a in range(d):
+        # kept shear terms holding u_a(I): (a, b) at I and at I + e_b (whole-array shifts: a
+        # per-position neighbour lookup cost 0.3 s on the 128^3 sphere, where nothing is weak)
+        kept = np.zeros(n, dtype=np.int8)
+        for q, b in shear_of[a]:
+            on = ve[q] > 0
+            kept += on[:n]
+            kept += _shift_up(lay, on, b)[:n]
+        cpos = np.nonzero(free[a, :n] & (kept <= WEAK_EDGES))[0]
+        if not len(cpos):
+            continue
+        count = kept[cpos].astype(np.int64)
+        # runs: faces p and p + e_a share cell p; a run linked to any other sample is held
+        up, down = lay.shifted(cpos, a, 1), lay.shifted(cpos, a, -1)
+        link_up, link_down = vc[cpos] > 0, vc[down] > 0
+        k_up = np.minimum(np.searchsorted(cpos, up), len(cpos) - 1)
+        k_down = np.minimum(np.searchsorted(cpos, down), len(cpos) - 1)
+        inner = link_up & (cpos[k_up] == up)
+        held = (link_up & ~inner) | (link_down & (cpos[k_down] != down))
+        rows = np.nonzero(inner)[0]
+        graph = sp.coo_matrix((np.ones(len(rows)), (rows, k_up[rows])), shape=(len(cpos),) * 2)
+        m, label = csgraph.connected_components(graph, directed=False)
+        good = np.bincount(label, weights=held, minlength=m) == 0
+        good &= np.bincount(label, weights=count, minlength=m) <= WEAK_EDGES
+        keep = good[label]
+        if not keep.any():
+            continue
+        number = np.cumsum(good) - 1 + total
+        total += int(good.sum())
+        comps.append(np.full(int(keep.sum()), a))
+        poss.append(cpos[keep])
+        runs.append(number[label[keep]])
+    empty = np.zeros(0, dtype=np.int64)
+    if not total:
+        return Mechanisms(empty, empty, empty, empty, 0, 0.0)
+    comp, pos, run = np.concatenate(comps), np.concatenate(poss), np.concatenate(runs)
+    # the kept shear terms touching the weak runs, each once: (pair q, edge position e)
+    size = level.size
+    terms = []
+    for a in range(d):
+        on = comp == a
+        for q, b in shear_of[a]:
+            for e in (pos[on], lay.shifted(pos[on], b, 1)):
+                terms.append(q * size + e[ve[q, e] > 0])
+    terms = np.unique(np.concatenate(terms))
+    q_of, e_of = terms // size, terms % size
+    key = np.sort(comp * size + pos)
+    run_by_key = run[np.argsort(comp * size + pos)]
+
+    def run_at(c: int, p: np.ndarray) -> np.ndarray:
+        """Weak run number of samples (c, p), -1 for every other sample."""
+        k = np.minimum(np.searchsorted(key, c * size + p), len(key) - 1)
+        return np.where(key[k] == c * size + p, run_by_key[k], -1)
+
+    entries = []
+    for q, (qa, qb) in enumerate(pairs(d)):
+        e = e_of[q_of == q]
+        entries.append(np.stack([run_at(qa, e), run_at(qa, lay.shifted(e, qb, -1)),
+                                 run_at(qb, e), run_at(qb, lay.shifted(e, qa, -1))], axis=1))
+    entries = np.concatenate(entries)  # [terms, 4] run numbers, -1 for held samples
+    signs = np.array([1, -1, 1, -1])
+    moving = entries >= 0
+    c = moving.sum(axis=1)
+    pinned = np.zeros(total, dtype=bool)
+    pinned[entries[(c == 1)[:, None] & moving]] = True
+    pinned[entries[(c >= 3)[:, None] & moving]] = True
+    # terms tying two runs: s1 t1 + s2 t2 = 0, so t2 = -s1 s2 t1. Consistency of the signs around
+    # cycles: on the double cover (run, +-1), run r's two copies fall apart iff its set is consistent
+    tied = np.nonzero(c == 2)[0]
+    col = np.argsort(~moving[tied], axis=1, kind="stable")[:, :2]  # the two moving entries
+    r1, r2 = entries[tied, col[:, 0]], entries[tied, col[:, 1]]
+    same = -signs[col[:, 0]] * signs[col[:, 1]] > 0
+    base = sp.coo_matrix((np.ones(len(tied)), (r1, r2)), shape=(total, total))
+    m, group = csgraph.connected_components(base, directed=False)
+    twin = np.where(same, 0, total)
+    ends = (np.concatenate([r1, r1 + total]), np.concatenate([r2 + twin, r2 + total - twin]))
+    cover = sp.coo_matrix((np.ones(2 * len(tied)), ends), shape=(2 * total, 2 * total))
+    _, copy = csgraph.connected_components(cover, directed=False)
+    consistent = np.ones(m, dtype=bool)
+    np.logical_and.at(consistent, group, copy[:total] != copy[total:])
+    free_group = np.bincount(group, weights=pinned, minlength=m) == 0
+    valid = consistent & free_group
+    # the sign of each run relative to the first run of its set
+    first = np.full(m, total)
+    np.minimum.at(first, group, np.arange(total))
+    run_sign = np.where(copy[:total] == copy[first[group]], 1, -1)
+    number = np.cumsum(valid) - 1
+    dof = valid[group[run]]
+    return Mechanisms(comp[dof], pos[dof], number[group[run[dof]]], run_sign[run[dof]], int(valid.sum()),
+                      _fill(level, comp[dof], pos[dof]))
+
+
+def _shift_up(lay: TileLayout, values: np.ndarray, axis: int) -> np.ndarray:
+    """out[p] = values[p + e_axis] for a flat array [size] on ``lay`` (the zero tile's value where
+    p + e_axis is in a tile that is not kept): a slice within each tile, the neighbour tile's first
+    layer at its last."""
+    d = lay.dim
+    tiles = values.reshape((lay.count + 1,) + (TILE,) * d)
+    out = np.empty_like(tiles)
+    inner = [slice(None)] * (d + 1)
+    src = list(inner)
+    inner[axis + 1], src[axis + 1] = slice(0, TILE - 1), slice(1, TILE)
+    out[tuple(inner)] = tiles[tuple(src)]
+    # the last layer reads the first layer of the neighbour tile one step up along axis
+    code = (3**d - 1) // 2 + 3 ** (d - 1 - axis)
+    up = np.append(lay.neighbours()[:, code], lay.count)  # the zero tile's neighbour is itself
+    last, first = list(inner), list(inner)
+    last[axis + 1], first[axis + 1] = TILE - 1, 0
+    out[tuple(last)] = tiles[tuple(first)][up]
+    return out.reshape(-1)
+
+
+def _fill(level: Level, comp: np.ndarray, pos: np.ndarray) -> float:
+    """The largest fraction of the cells just above the samples (comp, pos) along their own axis
+    that hold material (a run's cells; 0 when there are none)."""
+    out = 0.0
+    for a in range(level.dim):
+        p = pos[comp == a]
+        if len(p):
+            out = max(out, float(level.vc_host[p].max()))
+    return out
+
+
+def describe_thin_features(level: Level, mech: Mechanisms) -> str:
+    """The user's message for ``mech`` (count > 0) on ``level``: how many motions nothing holds,
+    where (sample positions in m when the level knows its origin, else grid indices) and what to
+    change. Starts with the setting to change (``grid.cell_size: ...``)."""
+    d, h = level.dim, level.spacing
+    index = level.layout.indices()[mech.pos].astype(np.float64)
+    if level.origin is not None:
+        where = np.asarray(level.origin) + h * (index + 0.5 - 0.5 * np.eye(d)[mech.comp])
+        unit = " m"
+    else:
+        where, unit = index, " (grid indices)"
+    fmt = lambda v: "(" + ", ".join(f"{x:.4g}" for x in v) + ")"  # noqa: E731
+    along = ", ".join(f"{int(np.sum(mech.comp == a))} u_{'xyz'[a]}" for a in range(d) if np.any(mech.comp == a))
+    thick = mech.fill * h
+    return (
+        f"grid.cell_size: {mech.count} independent motion(s) of displacement samples ({len(mech.pos)} DOFs: {along}) "
+        f"cost no strain energy, so the stiffness matrix is singular: they lie in material thinner than a grid cell "
+        f"(h = {h:.4g} m) that lies inside one cell layer (walls or rods filling at most {mech.fill:.0%} of their "
+        f"cells, about {thick:.3g} m thick for a wall), where the staggered grid has one sample across the thickness "
+        f"and nothing resists moving it across; the samples lie between {fmt(where.min(axis=0))} and "
+        f"{fmt(where.max(axis=0))}{unit}. Refine the grid so that every wall crosses a grid plane (a grid.cell_size no "
+        f"larger than the thinnest wall's thickness, here about {thick:.3g} m, always does), thicken the walls, or use "
+        f"method.kind 'dg'"
+    )
+
+
 def dof_bodies(level: Level, comp: np.ndarray, pos: np.ndarray) -> np.ndarray:
     """Body label [n] (1, 2, ...; 0 if none) of face DOFs (comp [n], flat position [n]): the
     connected component of material cells (edge connectivity: cells sharing only a vertex share
@@ -251,6 +448,7 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     vc, ve = _snap(vc), _snap(ve)
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype)
     level.slivers = slivers
+    level.origin = tuple(float(o) for o in grid.origin)
     return level
 
 
@@ -266,7 +464,10 @@ def make_coarse_level(fine: Level) -> Level:
     vf = np.zeros((d, layout.size))
     kernels.coarse_fractions(d, layout.coords, layout.tile_map, fine.layout.tile_map, fine.layout.count,
                              fine.vc_host, vc, ve, vf)
-    return _pruned(layout, 2 * fine.spacing, vc, ve, vf, fine.lam, fine.mu, fine.dtype)
+    coarse = _pruned(layout, 2 * fine.spacing, vc, ve, vf, fine.lam, fine.mu, fine.dtype)
+    if fine.origin is not None:  # coarse cell J covers fine cells 2 J - 2 + {0, 1}^d
+        coarse.origin = tuple(o - coarse.spacing for o in fine.origin)
+    return coarse
 
 
 def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float, dtype: type | None) -> Level:
