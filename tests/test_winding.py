@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 import engine.geometry.winding as winding
-from engine.geometry.winding import inside, winding_number
+from engine.geometry.winding import inside, winding_number, winding_number_fast
 
 
 @pytest.fixture(scope="module")
@@ -90,3 +90,140 @@ def test_shapes_are_checked():
         winding_number(np.eye(3), [[0, 1]], np.zeros((1, 3)))
     with pytest.raises(ValueError, match=r"points must have shape \[n, 2\]"):
         winding_number(np.eye(2), [[0, 1]], np.zeros((1, 3)))
+
+
+# --- Hierarchical fast winding number (winding_number_fast) and the fast path of inside ---
+
+
+def _probes(mesh: trimesh.Trimesh, n: int, seed: int) -> np.ndarray:
+    """Points of every kind [~3.25 n, 3]: uniform in the enlarged bounding box, exactly on faces,
+    within 1e-9 of the surface on either side, and exactly on vertices."""
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.bounds
+    box = rng.uniform(lo - 0.3 * (hi - lo), hi + 0.3 * (hi - lo), (n, 3))
+    on_face, face = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    near = on_face + 1e-9 * rng.choice([-1.0, 1.0], (n, 1)) * mesh.face_normals[face]
+    corner = mesh.vertices[rng.integers(0, len(mesh.vertices), n // 4)]
+    return np.vstack([box, on_face, near, corner])
+
+
+@pytest.fixture(scope="module")
+def fine_sphere() -> trimesh.Trimesh:
+    return trimesh.creation.icosphere(subdivisions=4)  # 5120 faces
+
+
+@pytest.fixture(scope="module")
+def torus() -> trimesh.Trimesh:
+    return trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=48, minor_sections=24)
+
+
+@pytest.mark.parametrize("name", ["fine_sphere", "torus"])
+def test_fast_winding_number_agrees_with_exact(name, request):
+    mesh = request.getfixturevalue(name)
+    points = _probes(mesh, 200, seed=4)
+    exact = winding_number(mesh.vertices, mesh.faces, points)
+    # Measured max |fast - exact| at beta = 2: 2.1e-3 (sphere), 5.4e-3 (torus, near its centre).
+    fast = winding_number_fast(mesh.vertices, mesh.faces, points)
+    np.testing.assert_allclose(fast, exact, rtol=0, atol=1e-2)
+    # The far-field error falls like beta^-3: measured 1.1e-4 and 1.3e-4 at beta = 4.
+    fast = winding_number_fast(mesh.vertices, mesh.faces, points, beta=4.0, leaf_faces=8)
+    np.testing.assert_allclose(fast, exact, rtol=0, atol=3e-4)
+
+
+def test_fast_winding_number_small_and_degenerate_meshes(sphere):
+    # Degenerate triangles (a repeated corner, a sliver) and a mesh smaller than one leaf.
+    faces = np.vstack([sphere.faces, [[0, 0, 1], [2, 2, 2]]])
+    points = _probes(sphere, 50, seed=5)
+    exact = winding_number(sphere.vertices, faces, points)
+    fast = winding_number_fast(sphere.vertices, faces, points)
+    np.testing.assert_allclose(fast, exact, rtol=0, atol=2e-3)
+    octant, triangle = np.eye(3), [[0, 1, 2]]
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.2, 0.3, 0.5]])
+    fast = winding_number_fast(octant, triangle, points)  # one leaf: exact
+    np.testing.assert_allclose(fast, winding_number(octant, triangle, points), rtol=0, atol=1e-15)
+
+
+def test_fast_winding_number_arguments():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1.0]])
+    segments = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    assert winding_number_fast(square, segments, np.array([[0.5, 0.5]])).tolist() == [1.0]  # 2D: exact
+    no_faces = np.zeros((0, 3), dtype=int)
+    assert winding_number_fast(np.eye(3), no_faces, np.zeros((2, 3))).tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match="beta must exceed 1"):
+        winding_number_fast(np.eye(3), [[0, 1, 2]], np.zeros((1, 3)), beta=1.0)
+    with pytest.raises(ValueError, match="leaf_faces must be at least 2"):
+        winding_number_fast(np.eye(3), [[0, 1, 2]], np.zeros((1, 3)), leaf_faces=1)
+
+
+class _Spy:
+    """Wraps a function of (vertices, faces, points), recording how many points each call got."""
+
+    def __init__(self, function):
+        self.function, self.calls = function, []
+
+    def __call__(self, vertices, faces, points, **kwargs):
+        self.calls.append(len(points))
+        return self.function(vertices, faces, points, **kwargs)
+
+
+def _inside_fast(monkeypatch, vertices, faces, points) -> tuple[np.ndarray, list[int], list[int]]:
+    """inside() forced onto the fast path; returns it and the point counts given to the fast and
+    the exact winding number."""
+    monkeypatch.setattr(winding, "_FAST_MIN_PAIRS", 0)
+    fast, exact = _Spy(winding.winding_number_fast), _Spy(winding.winding_number)
+    monkeypatch.setattr(winding, "winding_number_fast", fast)
+    monkeypatch.setattr(winding, "winding_number", exact)
+    result = inside(vertices, faces, points)
+    monkeypatch.undo()
+    return result, fast.calls, exact.calls
+
+
+def _lame_shell() -> tuple[np.ndarray, np.ndarray]:
+    """A thick spherical shell: outer radius 1 outward, inner radius 1/2 inward (w = 0 in the cavity)."""
+    outer = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    inner = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    vertices = np.vstack([outer.vertices, inner.vertices])
+    return vertices, np.vstack([outer.faces, inner.faces[:, ::-1] + len(outer.vertices)])
+
+
+@pytest.mark.parametrize("name", ["torus", "shell"])
+def test_inside_fast_path_decides_like_the_exact_path(name, request, monkeypatch):
+    if name == "shell":
+        vertices, faces = _lame_shell()
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+    else:
+        mesh = request.getfixturevalue(name)
+        vertices, faces = mesh.vertices, mesh.faces
+    points = _probes(mesh, 300, seed=6)
+    edges = mesh.vertices[mesh.edges_unique[:100]].mean(axis=1)  # exactly on edges
+    points = np.vstack([points, edges])
+    expected = winding_number(vertices, faces, points) >= 0.5 - 1e-12
+    result, fast_calls, exact_calls = _inside_fast(monkeypatch, vertices, faces, points)
+    np.testing.assert_array_equal(result, expected)
+    assert fast_calls == [len(points)]
+    # Only the points on the surface (1/2 there) are recomputed exactly; those 1e-9 off it are not.
+    on_surface = 300 + 300 // 4 + 100
+    assert len(exact_calls) == 1 and exact_calls[0] <= on_surface + 20
+
+
+def test_inside_fast_path_on_an_open_surface(monkeypatch):
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    keep = sphere.triangles_center[:, 2] < 0.7  # a hole around the north pole
+    vertices, faces = sphere.vertices, sphere.faces[keep]
+    rng = np.random.default_rng(7)
+    near_hole = rng.uniform([-0.5, -0.5, 0.5], [0.5, 0.5, 1.5], (500, 3))
+    points = np.vstack([rng.uniform(-1.3, 1.3, (1500, 3)), near_hole])
+    w = winding_number(vertices, faces, points)
+    ambiguous = np.abs(w - np.round(w)) > 0.2
+    assert ambiguous.sum() > 50  # fractional w near the hole
+    result, _, exact_calls = _inside_fast(monkeypatch, vertices, faces, points)
+    np.testing.assert_array_equal(result, w >= 0.5 - 1e-12)
+    assert exact_calls and ambiguous.sum() <= exact_calls[0] < len(points)
+
+
+def test_inside_small_cases_stay_exact(sphere, monkeypatch):
+    fast = _Spy(winding.winding_number_fast)
+    monkeypatch.setattr(winding, "winding_number_fast", fast)
+    points = np.random.default_rng(8).uniform(-1.2, 1.2, (1000, 3))  # 1.28 M pairs
+    inside(sphere.vertices, sphere.faces, points)
+    assert fast.calls == []
