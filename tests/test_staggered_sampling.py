@@ -1,5 +1,6 @@
 """Staggered sampling: multilinear stencils, masked interpolation, surface quadrature, consistent loads."""
 
+import itertools
 import math
 
 import numpy as np
@@ -197,6 +198,115 @@ def test_masked_surface_loads_are_the_transpose_of_interpolate(d, rng):
     with pytest.raises(VoxelasticError, match="rim load: 1 surface quadrature points"):
         inactive = lambda a, i: nothing[a][tuple(i.T)]  # noqa: E731
         surface_loads(grid, points[:1], weights[:1], tractions[:1], inactive, name="rim load")
+
+
+def resultant(grid, loads):
+    """Net force [d] [N] and moment [pairs] [N m] (about the origin, planes (k, l), k < l) of
+    per-component sample loads, each force acting at its sample."""
+    d = grid.dim
+    force = np.array([f.sum() for _, f in loads])
+    first = np.array([[(f * grid.sample_points(i, np.eye(d)[a])[:, b]).sum() for b in range(d)]
+                      for a, (i, f) in enumerate(loads)])  # first[a, b] = sum f_a x_b
+    return force, np.array([first[l, k] - first[k, l] for k, l in itertools.combinations(range(d), 2)])
+
+
+def quadrature_resultant(points, weights, tractions):
+    """The same of the quadrature's point forces."""
+    d = points.shape[1]
+    f = weights[:, None] * tractions
+    first = f.T @ points
+    return f.sum(axis=0), np.array([first[l, k] - first[k, l] for k, l in itertools.combinations(range(d), 2)])
+
+
+def activity(surface, grid):
+    """active(a, index [M, d]) -> bool [M] of the staggered method on ``surface``: a face sample is
+    active where a cell on either side holds solid."""
+    from engine.geometry.fractions import volume_fractions
+
+    d = grid.dim
+    solid = np.zeros(tuple(np.asarray(grid.shape) + 2), dtype=bool)  # empty cells beyond either end
+    solid[tuple(slice(1, n + 1) for n in grid.shape)] = volume_fractions(surface, grid).dense() > 0
+    # face I of component a lies between cells I - e_a and I (shifted by one here)
+    box = tuple(slice(1, n + 2) for n in grid.shape)
+    dense = [solid[box] | solid[tuple(slice(0, n + 1) if k == a else slice(1, n + 2) for k, n in enumerate(grid.shape))]
+             for a in range(d)]
+    return lambda a, index: dense[a][tuple(index.T)]
+
+
+def rotated_bodies(d):
+    """Two boxes (3D) / rectangles (2D) rotated off the grid axes, apart: (grid, surface)."""
+    pieces = []
+    for shift in (0.0, 1.1):
+        if d == 3:
+            mesh = trimesh.creation.box(bounds=[[0, 0, 0], [0.9, 0.4, 0.3]])
+            mesh.apply_transform(trimesh.transformations.rotation_matrix(0.5, [1, 2, 3]))
+            mesh.apply_translation([0.43 + shift, 0.31, 0.27])
+            pieces.append(mesh)
+        else:
+            c, s_ = math.cos(0.5), math.sin(0.5)
+            pieces.append(np.array([[0, 0], [0.9, 0], [0.9, 0.4], [0, 0.4]]) @ np.array([[c, s_], [-s_, c]])
+                          + [0.43 + shift, 0.31])
+    surface = surface_of(trimesh.util.concatenate(pieces)) if d == 3 else polygon_surface_2d(*pieces)
+    return Grid(origin=(-0.5,) * d, spacing=0.1, shape=(33,) + (22,) * (d - 1)), surface
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_loads_on_free_rotated_bodies_keep_the_quadratures_force_and_moment(d):
+    grid, surface = rotated_bodies(d)
+    active = activity(surface, grid)
+    split = 1.0  # the bodies lie on either side of x = 1.0
+
+    def free(a, index):
+        return np.where(active(a, index), 1 + (grid.sample_points(index, np.eye(d)[a])[:, 0] > split), 0)
+
+    # pressure -1 Pa: the traction is the unit outward normal
+    points, weights, normals = boundary_tractions(surface, Ball(np.full(d, 0.5), 10.0), grid.spacing, pressure=-1.0,
+                                                  name="all")
+    rng = np.random.default_rng(5)
+    tractions = rng.normal(size=(len(points), d)) * 1e3 + points @ rng.normal(size=(d, d)) * 1e3
+    scale = np.abs(weights[:, None] * tractions).sum()  # [N]; the bodies lie within 2 m of the origin
+    for body in (points[:, 0] <= split, points[:, 0] > split):
+        want_force, want_moment = quadrature_resultant(points[body], weights[body], tractions[body])
+        # renormalising over the active samples keeps the force, not the moment ...
+        plain = surface_loads(grid, points[body], weights[body], tractions[body], active)
+        force, moment = resultant(grid, plain)
+        np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
+        assert np.abs(moment - want_moment).max() > 1e-4 * scale * grid.spacing
+        # ... the couple on a free body restores it, each body's for itself
+        loads = surface_loads(grid, points, weights, np.where(body[:, None], tractions, 0.0), active, free=free)
+        force, moment = resultant(grid, loads)
+        np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(moment, want_moment, rtol=0, atol=2e-12 * scale)
+        for a, (index, f) in enumerate(loads):
+            assert active(a, index).all()
+    # balanced on the surface (a pressure all around), balanced on the samples
+    loads = surface_loads(grid, points, weights, -2.5e3 * normals, active, free=free)
+    force, moment = resultant(grid, loads)
+    total = 2.5e3 * weights.sum()
+    assert np.abs(force).max() < 1e-12 * total and np.abs(moment).max() < 2e-12 * total
+
+
+def test_a_symmetric_load_on_a_grid_aligned_face_gets_no_couple():
+    # faces on grid planes, a uniform pull on a whole end face: the renormalised weights already
+    # give the exact moment, so the loads are those of a body that is held (T times each sample's
+    # control-volume face area, which the operator turns into exactly uniform stress). 0.4 x 0.2:
+    # the quadrature's pieces have their edges on the samples' lattice lines, so the rule
+    # integrates the stencil exactly.
+    grid = Grid(origin=(-0.2, -0.2, -0.2), spacing=0.1, shape=(11, 8, 7))
+    surface = surface_of(trimesh.creation.box(bounds=[[0.0, 0.0, 0.0], [0.6, 0.4, 0.2]]))
+    active = activity(surface, grid)
+    end = Halfspaces(np.array([[-1.0, 0.0, 0.0]]), np.array([-0.6]))  # x >= 0.6: side faces meet it in zero area
+    points, weights, t = boundary_tractions(surface, end, grid.spacing, traction=[50.0, 0.0, 0.0], name="pull")
+    free = lambda a, index: active(a, index).astype(np.int64)  # noqa: E731
+    (index, f), *_ = surface_loads(grid, points, weights, t, active, free=free)
+    (held_index, held_f), *_ = surface_loads(grid, points, weights, t, active)
+    np.testing.assert_array_equal(index, held_index)
+    np.testing.assert_array_equal(f, held_f)
+    face = index[:, 0] == 8  # x = 0.6
+    assert face.sum() == 4 * 2
+    np.testing.assert_allclose(f[face], 50.0 * 0.1 * 0.1, rtol=1e-12)
+    # behind the face only round-off: (0.6 + 0.2) / 0.1 is 7.999999999999999 in floating point
+    assert np.abs(f[~face]).max(initial=0.0) < 1e-12 * 50.0 * 0.4 * 0.2
 
 
 def test_pressure_on_a_sphere_balances_and_on_a_cap_gives_the_projected_area():

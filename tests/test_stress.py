@@ -73,9 +73,12 @@ OFFSETS = (0.0, 1e-6, 0.4, 0.99, 1 - 1e-6)  # 5 of the suite's 16: the extremes 
 
 @pytest.mark.parametrize("method", [
     pytest.param("staggered", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-        "measured tip spread 20% at h = W/6 (6.27e-3 at offset 0, 6.66e-3 at 1e-6, 7.13e-3 at 0.4, 5.83e-3 at 0.99): "
-        "the clamp holds the DOF samples inside its region, which move with the cut by up to h, and at offsets "
-        "of 1e-6 sliver samples beyond the tip face take half of the tip traction"))),
+        "measured tip spread 20% at h = W/6 (6.27e-3 at offset 0, 6.66e-3 at 1e-6, 7.13e-3 at 0.4, 5.83e-3 at 0.99), "
+        "three causes, each alone above 5%: the clamp holds the samples inside its region, a set that jumps by h "
+        "with the cut (x shift 0.4 h alone: +18%); cut cells weigh their strain at the cell centre, not at the "
+        "solid's centroid, so the bar bends stiffer (shift 0.3 h along the load alone: -6.8%); and with the tip "
+        "face on a grid plane (offset 0) the tip load and probe fall back on the samples h/2 inside (-6% against "
+        "1e-6, where the samples beyond the face are active)"))),
     "dg",
 ])
 def test_sub_cell_offsets_change_the_tip_by_less_than_5_percent(method):
@@ -178,17 +181,15 @@ def test_balanced_free_body_is_solved_off_the_rigid_modes_with_a_warning(method)
     assert abs(row.values["ratio"] - 1) < 1e-3  # uniform stress T: the stretch is T L / E
 
 
-@pytest.mark.parametrize("method", [
-    pytest.param("staggered", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-        "balanced end tractions on the rotated bar raise UnbalancedLoadError (net force 0, net torque "
-        "[-1.1e-3, 2.2e-4, -9.3e-5] N m of 18.98 N total load): surface loads are spread to the active samples "
-        "with renormalised weights, which moves their points of application at cut cells"))),
-    "dg",
-])
-def test_balanced_loads_on_a_rotated_free_body_are_accepted(method):
+@pytest.mark.parametrize("method, tolerance", [("staggered", 2e-2), ("dg", 1e-3)])
+def test_balanced_loads_on_a_rotated_free_body_are_accepted(method, tolerance):
+    # The spread loads keep the quadrature's net force and moment per free body (sampling.surface_loads),
+    # so balanced tractions on a bar off the axes pass the rigid-mode check. Measured stretch / (T L / E):
+    # staggered 1.0075 (the rotated bar's interior strain is 1.0097 T / E at h = W / 6: the cut-cell
+    # operator's discretisation error, within the 2% the rotated-bar bending test allows), DG within 1e-3
     row = S.free_body_run(method, SIZE, rotated=True, balanced=True)
     assert_passed([row])
-    assert row.values["warned"] and abs(row.values["ratio"] - 1) < 1e-3
+    assert row.values["warned"] and abs(row.values["ratio"] - 1) < tolerance
 
 
 @pytest.mark.parametrize("method", METHODS)

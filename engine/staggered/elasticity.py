@@ -2,9 +2,11 @@
 
 ``StaggeredElasticity`` sequences the pieces: the fine ``Level`` (tiles touching material, exact
 fractions), prescribed DOFs from displacement regions, the consistent load vector (body force
-weighted by face fractions, surface tractions by quadrature on the mesh triangles), rigid-mode
-checks for bodies the prescribed DOFs leave free, the multigrid-preconditioned CG solve and the
-fields at cell centres, probes and surface vertices. ``engine.analysis`` drives it in time.
+weighted by face fractions, surface tractions by quadrature on the mesh triangles; on a body that
+no displacement boundary holds, with the surface loads' exact net moment, so that loads balanced on
+the surface stay balanced), rigid-mode checks for bodies the prescribed DOFs leave free, the
+multigrid-preconditioned CG solve and the fields at cell centres, probes and surface vertices.
+``engine.analysis`` drives it in time.
 """
 
 from __future__ import annotations
@@ -105,8 +107,9 @@ class StaggeredElasticity:
             self._prescribe(bc, fixed)
         level.set_free(level.active & ~fixed)
         self.fixed = fixed & level.active
-        self.loads = self._load_vector()
+        self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes()
+        self.loads = self._load_vector()
         if self.modes:
             check_balance(self.dof_points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
                           [(dofs, q) for dofs, q, _ in self.modes])
@@ -158,13 +161,16 @@ class StaggeredElasticity:
                 for k in range(d):
                     f[k] += (grid.spacing**d * g[k]) * (level.vf_host[k] * level.active[k])
         active = self._active_lookup
+        # a body held by nothing must be loaded in balance: its surface loads keep their moment
+        free = self._free_body_lookup()
         for load in self.surface_loads:
             if load.form == "divergence":
                 f += self._divergence_load(load)
                 continue
             pts, w, t = sampling.boundary_tractions(self.surface, load.region, grid.spacing, name=load.name,
                                                     traction=load.traction, pressure=load.pressure, stress=load.stress)
-            for a, (index, force) in enumerate(sampling.surface_loads(grid, pts, w, t, active, name=load.name)):
+            spread = sampling.surface_loads(grid, pts, w, t, active, free=free, name=load.name)
+            for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
@@ -216,10 +222,28 @@ class StaggeredElasticity:
         pos = self.level.layout.positions(index)
         return (pos >= 0) & self.level.active[a, np.maximum(pos, 0)]
 
+    def _free_body_lookup(self) -> Callable[[int, np.ndarray], np.ndarray] | None:
+        """lookup(a, index [M, d]) -> int [M]: the body label of samples of bodies that no
+        displacement boundary holds at all, 0 elsewhere; None when there is no such body."""
+        held = np.unique(self.dof_body[self.fixed[self.dof_comp, self.dof_pos]])
+        loose = np.setdiff1d(np.unique(self.dof_body), np.append(held, 0))
+        if len(loose) == 0:
+            return None
+        labels = np.zeros((self.dim, self.level.size), dtype=np.int32)
+        on = np.isin(self.dof_body, loose)
+        labels[self.dof_comp[on], self.dof_pos[on]] = self.dof_body[on]
+        layout = self.level.layout
+
+        def lookup(a: int, index: np.ndarray) -> np.ndarray:
+            pos = layout.positions(index)
+            return np.where(pos >= 0, labels[a, np.maximum(pos, 0)], 0)
+
+        return lookup
+
     def _floating_modes(self) -> list:
         """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
         positions a * size + p of those DOFs)."""
-        body = dof_bodies(self.level, self.dof_comp, self.dof_pos)
+        body = self.dof_body
         fixed = self.fixed[self.dof_comp, self.dof_pos]
         out = []
         for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body):
@@ -264,6 +288,8 @@ class StaggeredElasticity:
             x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
             stats = pcg(self.space, level.apply, self._preconditioner(self._jacobi), b, x,
                         rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
+        # a true residual the restarts left above rtol (within the solver's slack) goes in the report
+        self.warnings.extend(w for w in stats.warnings if w not in self.warnings)
         u = x.to_numpy().astype(np.float64)
         if self.modes:
             u = self._project(u)

@@ -8,12 +8,18 @@ interpolation, ``f_a(I) = sum_q w_q t_a(x_q) phi_{a,I}(x_q)``, so that ``sum f .
 quadrature of ``integral t . u_h dA``: the load does work on exactly the displacement the output
 reports, and a constant traction keeps its total force.
 
+Renormalising over the active samples moves a point's force to where they are, so at cut cells
+the load's moment is off by O(h F). Where that decides solvability -- a body held by nothing,
+whose loads must balance -- the body's load gets the self-equilibrated couple that restores its
+first moments (``_moment_couple``): the discrete load then has the quadrature's net force *and*
+net moment, and a load that balances on the surface balances on the samples.
+
 Surface integrals use a degree-5 Gauss rule on pieces no longer than h/2 (``surface_quadrature``);
 ``boundary_tractions`` turns a traction / pressure / stress boundary condition on a region of the
 surface into quadrature points, weights and traction vectors.
 
 Units: positions [m], tractions, pressures and stresses [Pa], weights [m^2] (3D) or [m] (2D), forces
-[N] (2D: per unit thickness, [N/m]).
+[N] (2D: per unit thickness, [N/m]); lattice offsets in units of h.
 """
 
 from __future__ import annotations
@@ -33,6 +39,19 @@ from ..regions import Region, _subdivide, require_selection
 Lookup = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 # active(a, index [M, d] int64) -> bool [M]; index always inside the index box.
 Active = Callable[[int, np.ndarray], np.ndarray]
+# free(a, index [M, d] int64) -> int [M]: a label > 0 for samples of a body held by nothing (one
+# per body), 0 elsewhere; index always inside the index box.
+Free = Callable[[int, np.ndarray], np.ndarray]
+
+# A direction in which the samples that may take a moment couple spread less than this (second
+# moment per unit room, lattice units) cannot carry one: they lie in a plane (a wall thinner than
+# a cell, a load on one row of samples).
+SPREAD_CUTOFF = 1e-9
+# A first-moment excess [N h] below this times the load's size is round-off of the levers (a
+# symmetric patch): no couple, so no dust of 1e-17 N on the samples around.
+ROUNDOFF_MOMENT = 1e-13
+# Points handled at once when a couple is built (bounds the [chunk, 4^d, d] temporaries).
+CHUNK = 16384
 
 
 def stencil(grid: Grid, points: np.ndarray, a: int) -> tuple[np.ndarray, np.ndarray]:
@@ -113,6 +132,7 @@ def surface_loads(
     tractions: np.ndarray,
     active: Active | None = None,
     *,
+    free: Free | None = None,
     name: str = "surface load",
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Consistent load vector of tractions [Q, d] [Pa] at quadrature ``points`` [Q, d] with ``weights`` [Q].
@@ -127,6 +147,10 @@ def surface_loads(
     inactive samples are dropped and the rest renormalised, so no force is lost on inactive DOFs
     (sum_I f_a(I) = sum_q w_q t_a exactly) and only active indices are returned. A point with a
     nonzero traction component but no active sample raises an error naming ``name``.
+
+    With ``free`` as well (labels of the bodies held by nothing), each such body's load also gets
+    the couple that gives it the quadrature's net moment (to round-off; unless the active samples
+    around span too little), added on the active samples within 2h of its points.
     """
     points = np.asarray(points, dtype=float)
     weights = np.asarray(weights, dtype=float)
@@ -142,22 +166,120 @@ def surface_loads(
         index, phi = stencil(grid, points, a)
         load = weights * tractions[:, a]
         if active is not None:
-            is_active = _read(grid, index, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
-            phi = np.where(is_active, phi, 0.0)
-            total = phi.sum(axis=1)
-            lost = (total == 0) & (load != 0)
-            if lost.any():
-                raise VoxelasticError(
-                    f"{name}: {int(lost.sum())} surface quadrature points carrying "
-                    f"{np.abs(load[lost]).sum():.6g} N of force along axis {a} have no active displacement "
-                    "sample nearby; the surface lies outside the material the grid resolves"
-                )
-            phi = phi / np.where(total > 0, total, 1.0)[:, None]
+            phi = _renormalised(grid, index, phi, a, active, load, name)
         keep = phi > 0
-        unique, inverse = np.unique(index[keep], axis=0, return_inverse=True)
-        force = np.bincount(inverse.ravel(), weights=(load[:, None] * phi)[keep], minlength=len(unique))
-        loads.append((unique.reshape(-1, d).astype(np.int64), force))
+        samples, inverse = _unique_rows(index[keep])
+        force = np.bincount(inverse, weights=(load[:, None] * phi)[keep], minlength=len(samples))
+        if active is not None and free is not None:
+            samples, force = _balanced(grid, points, load, a, (index, phi, keep), (samples, force), active, free)
+        loads.append((samples, force))
     return loads
+
+
+def _renormalised(grid: Grid, index: np.ndarray, phi: np.ndarray, a: int, active: Active, load: np.ndarray,
+                  name: str) -> np.ndarray:
+    """Stencil weights phi [N, 2^d] over the active samples of ``index`` only, each row renormalised
+    to 1; a point with force ``load`` [N] [N] != 0 and no active sample is an error naming ``name``."""
+    is_active = _read(grid, index, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+    phi = np.where(is_active, phi, 0.0)
+    total = phi.sum(axis=1)
+    lost = (total == 0) & (load != 0)
+    if lost.any():
+        raise VoxelasticError(
+            f"{name}: {int(lost.sum())} surface quadrature points carrying "
+            f"{np.abs(load[lost]).sum():.6g} N of force along axis {a} have no active displacement "
+            "sample nearby; the surface lies outside the material the grid resolves"
+        )
+    return phi / np.where(total > 0, total, 1.0)[:, None]
+
+
+def _balanced(grid: Grid, points: np.ndarray, load: np.ndarray, a: int, spread: tuple, summed: tuple,
+              active: Active, free: Free) -> tuple[np.ndarray, np.ndarray]:
+    """(samples [K, d], force [K]) of component a with each free body's moment couple added.
+
+    spread: the points' (index [N, 2^d, d], renormalised weights phi [N, 2^d], keep = phi > 0);
+    summed: their forces summed per sample. The excess first moment of a body's load is
+    sum F_q phi_qI (x_I - x_q) over its samples (positions in h); the couple acts on the active
+    samples around the same points, each point offering room |F_q| spread by a hat of width 2h."""
+    index, phi, keep = spread
+    samples, force = summed
+    d = grid.dim
+    label = np.asarray(free(a, index[keep]), dtype=np.int64)  # per (point, sample) entry
+    if not (label > 0).any():
+        return samples, force
+    shift = 0.5 - 0.5 * np.eye(d)[a]
+    xi = (points - np.asarray(grid.origin)) / grid.spacing - shift  # lattice coordinates [N, d]
+    rows = np.nonzero(keep)[0]
+    lever = (load[rows] * phi[keep])[:, None] * (index[keep] - xi[rows])  # force times (sample - point)
+    lever[:, a] = 0.0  # the lever along a does not turn f_a
+    labels = np.unique(label[label > 0])
+    excess = np.stack([lever[label == k].sum(axis=0) for k in labels])  # [bodies, d] [N h]
+    size = np.abs(load).sum()
+    held = [k for k, e in zip(labels, excess) if np.abs(e).max() > ROUNDOFF_MOMENT * size]
+    if not held:
+        return samples, force
+    room_index, room = _room(grid, xi, load, a, np.unique(rows[np.isin(label, held)]), active)
+    room_label = np.asarray(free(a, room_index), dtype=np.int64)
+    out_index, inverse = _unique_rows(np.concatenate([samples, room_index]))
+    out = np.bincount(inverse[: len(samples)], weights=force, minlength=len(out_index))
+    for k in held:
+        mine = room_label == k
+        couple = _moment_couple(room_index[mine].astype(float), room[mine], excess[labels == k][0], a)
+        np.add.at(out, inverse[len(samples):][mine], couple)
+    keep = (np.bincount(inverse[: len(samples)], minlength=len(out_index)) > 0) | (out != 0)
+    return out_index[keep], out[keep]
+
+
+def _room(grid: Grid, xi: np.ndarray, load: np.ndarray, a: int, rows: np.ndarray,
+          active: Active) -> tuple[np.ndarray, np.ndarray]:
+    """Where a couple may act for the points ``rows``: the active samples among the 4^d around
+    each (lattice offsets -1..2 from its cell), each point offering its |force| [N] spread by a hat
+    of width 2h (zero at the neighbourhood's edge, so samples enter it continuously). Returns the
+    distinct samples (index [K, d]) and their room [K] [N]."""
+    d = grid.dim
+    around = np.array(list(itertools.product((-1, 0, 1, 2), repeat=d)), dtype=np.int64)  # [4^d, d]
+    base = np.floor(xi[rows]).astype(np.int64)
+    cells, cell_of = _unique_rows(base)  # many points share a cell: look samples up once per cell
+    near = cells[:, None, :] + around[None]
+    is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+    room = np.zeros(near.shape[:2])
+    for start in range(0, len(rows), CHUNK):
+        part = slice(start, start + CHUNK)
+        cell = cell_of[part]
+        r = near[cell] - xi[rows[part]][:, None, :]
+        hat = np.clip(1.0 - 0.5 * np.abs(r), 0.0, None).prod(axis=2) * is_active[cell]
+        hat *= (np.abs(load[rows[part]]) / np.where(hat.sum(axis=1) > 0, hat.sum(axis=1), 1.0))[:, None]
+        np.add.at(room, cell, hat)
+    on = room > 0
+    return near[on], room[on]
+
+
+def _moment_couple(x: np.ndarray, room: np.ndarray, excess: np.ndarray, a: int) -> np.ndarray:
+    """Forces [K] [N] on component-a samples at lattice positions x [K, d] (repeats allowed) that sum
+    to zero and whose first moments along the axes b != a are -excess[b] [N h]:
+    ``room * (beta . (x - xbar))``, the smallest such forces in the room-weighted norm (room [K] >= 0
+    [N]: how much force each may take). A moment along a direction in which the samples with room do
+    not spread (second moment below SPREAD_CUTOFF) is left."""
+    if room.sum() <= 0:
+        return np.zeros(len(x))
+    xbar = room @ x / room.sum()
+    transverse = np.arange(x.shape[1]) != a  # the moment of f_a needs only its lever across a
+    xc = (x - xbar)[:, transverse]
+    e, v = np.linalg.eigh(np.einsum("k,ki,kj->ij", room, xc, xc))
+    keep = e > SPREAD_CUTOFF * room.sum()
+    beta = v[:, keep] @ ((v[:, keep].T @ -excess[transverse]) / e[keep])
+    return room * (xc @ beta)
+
+
+def _unique_rows(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct rows of integer index [n, d] (sorted) and where each row went [n]: one 1D sort of
+    linear keys (np.unique along axis 0 sorts rows as bytes, seconds for millions)."""
+    if len(index) == 0:
+        return index.reshape(0, index.shape[-1]).astype(np.int64), np.zeros(0, dtype=np.int64)
+    lo = index.min(axis=0)
+    dims = tuple(int(n) for n in index.max(axis=0) - lo + 1)
+    keys, inverse = np.unique(np.ravel_multi_index(tuple((index - lo).T), dims), return_inverse=True)
+    return (np.stack(np.unravel_index(keys, dims), axis=1) + lo).astype(np.int64), inverse.ravel()
 
 
 def boundary_tractions(
