@@ -58,10 +58,11 @@ def face_penalty(el: Elements, eta: float) -> np.ndarray:
     return eta * el.area * (1.0 / el.volume[el.minus] + 1.0 / el.volume[el.plus])
 
 
-def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, weights: tuple[float, float, float]
-                ) -> np.ndarray:
+def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, weights: tuple[float, float, float],
+                rest: float = 1.0) -> np.ndarray:
     """Interface blocks [F, 2, 2, 3 n, 3 n] (sides minus, plus); weights (penalty, consistency with the
-    minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ."""
+    minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ. ``rest``: the penalty's
+    weight on the part of the jump with zero mean over the face (its mean has weight 1)."""
     s = 3 * basis.size
     F = len(el.minus)
     out = np.empty((F, 2, 2, s, s))
@@ -72,7 +73,7 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     todo = np.concatenate(picks + [np.nonzero(~ref)[0]]).astype(np.int64)
     if len(todo) == 0:
         return out
-    M, N = face_products(el, basis, todo)
+    M, N = face_products(el, basis, todo, rest)
     blocks = np.empty((len(todo), 2, 2, s, s))
     kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(N), el.axis[todo].astype(np.int32),
                         np.ascontiguousarray(penalty[todo]), mu, lam, *weights, blocks)

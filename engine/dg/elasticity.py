@@ -35,11 +35,18 @@ from .integrals import Basis, make_basis, surface_points
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
-# towards continuous P_k on the hex grid, which for k = 1 locks in bending (cantilever tip 26% short at
-# 2.5, 60% at 10) and degrades the convergence on curved surfaces; k = 2 hardly depends on it
-# (docs/benchmarks.md). On the sphere the k = 1 matrix becomes positive definite between 1.25 and 1.5,
-# and at 1.5 the error is 5x that at 2.5: the default keeps that margin.
+# towards continuous P_k on the hex grid, which for k = 1 stiffens bending (cantilever tip 0.1005 at 2.5,
+# 0.0947 at 5, k = 2: 0.0997) and slows the convergence on curved surfaces; k = 2 hardly depends on it
+# (docs/benchmarks.md). The k = 1 matrix becomes positive definite between 1.25 and 1.5 on the ball
+# (between 1 and 2 on the thick sphere): 2.5 keeps a margin.
 DEFAULT_PENALTY = {1: 2.5, 2: 10.0}
+# k = 1 stresses are constant per element, so the IP consistency terms see only the face mean of a jump,
+# and only that part needs eta for coercivity. The rest is what a piecewise-affine field cannot avoid
+# (a bilinear term of the solution jumps linearly across every face); penalised in full it stiffens
+# k = 1 like a large eta (Lame sphere 1.56-1.70 per step, cantilever tip 24% short). Weighed at 1/10 it
+# still keeps alternating element rotations from costing nothing (at 0 the cantilever's matrix is
+# singular): Lame 1.8-2.2 per step, tip within 1.5% of k = 2 (docs/benchmarks.md). k = 2 keeps the full jump.
+JUMP_REST = {1: 0.1, 2: 1.0}
 MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means something else is wrong
 PIN_TOLERANCE = 1e-10  # a rigid mode is held when the Dirichlet patches see it with this share of its norm
 BALANCE_TOLERANCE = 1e-6
@@ -287,6 +294,11 @@ class DGElasticity:
         return cols @ combos
 
     # ------------------------------------------------------------------ system
+    @property
+    def jump_rest(self) -> float:
+        """Penalty weight on the zero-mean part of interface jumps (JUMP_REST; BZ: 1)."""
+        return JUMP_REST[self.degree] if self.flux == "ip" else 1.0
+
     def _build(self) -> None:
         """Assemble and factorise; double eta until an IP matrix is positive definite."""
         for attempt in range(MAX_DOUBLINGS + 1):
@@ -358,7 +370,7 @@ class DGElasticity:
         groups = [assembly.Group(every, every, self.element_blocks, every if warp else None)]
 
         def faces(weights, owner) -> None:
-            b = assembly.face_blocks(el, basis, mu, lam, eta, weights)
+            b = assembly.face_blocks(el, basis, mu, lam, eta, weights, self.jump_rest)
             groups.extend([assembly.Group(el.minus, el.minus, b[:, 0, 0], owner),
                            assembly.Group(el.plus, el.plus, b[:, 1, 1], owner),
                            assembly.Group(el.minus, el.plus, b[:, 0, 1], owner)])

@@ -101,11 +101,14 @@ def element_gradients(el: Elements, basis: Basis) -> tuple[np.ndarray, np.ndarra
             gradient_products(basis.T[cut], B.hankel(el.moments[cut], k), basis.h, k))
 
 
-def face_products(el: Elements, basis: Basis, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def face_products(el: Elements, basis: Basis, faces: np.ndarray, rest: float = 1.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Interface integrals of the faces ``faces`` [F']:
 
     M[f, X, Y, I, J] = int_f psi^X_I psi^Y_J dA [m^2], N[f, X, Y, a, I, J] = int_f psi^X_I d_a psi^Y_J dA [m]
-    with sides X, Y in (minus, plus).
+    with sides X, Y in (minus, plus). ``rest`` < 1 weighs M's part orthogonal to constants on the face
+    down: M = Mbar + rest (M - Mbar), Mbar = (int_f psi^X_I dA) (int_f psi^Y_J dA) / area(f), the
+    product of the face means.
     """
     k, h = basis.degree, basis.h
     sides = (el.minus[faces], el.plus[faces])
@@ -118,10 +121,16 @@ def face_products(el: Elements, basis: Basis, faces: np.ndarray) -> tuple[np.nda
     n = basis.size
     M = np.empty((len(faces), 2, 2, n, n))
     N = np.empty((len(faces), 2, 2, 3, n, n))
+    # H[:, s, 0] are the face moments of monomial s (monomial 0 is 1): the basis' face integrals
+    means = [h**2 * np.einsum("fis,fs->fi", A[X], H[:, :, 0]) for X in range(2)]
+    area = h**2 * H[:, 0, 0]
     for X in range(2):
         AH = np.einsum("fis,fst->fit", A[X], H)
         for Y in range(2):
             M[:, X, Y] = h**2 * np.einsum("fit,fjt->fij", AH, A[Y])
+            if rest != 1.0:
+                mean = means[X][:, :, None] * means[Y][:, None, :] / area[:, None, None]
+                M[:, X, Y] = mean + rest * (M[:, X, Y] - mean)
             dY = np.einsum("fjs,ast->fajt", A[Y], D)
             N[:, X, Y] = h * np.einsum("fit,fajt->faij", AH, dY)
     return M, N
