@@ -66,13 +66,18 @@ def estimate_memory(grid: Grid, method: str, degree: int = 1) -> int:
 
     staggered: per cell, the fractions of every control-volume kind plus ~12 solver vectors per
     displacement component (CG + multigrid hierarchy). dg: per cell, 7 blocks (element + 6 faces) of
-    (d * basis)^2 doubles, times 4 for assembly copies and the factorisation's fill.
+    (d * basis)^2 doubles, times 4 for assembly copies, times the sparse Cholesky factor's fill, which
+    grows like the grid's side in 3D (nested dissection). Measured peaks on the sphere shell
+    (`python -m benchmarks scaling`, grids 18^3 / 26^3 / 34^3): k = 2 1.51 / 5.34 / 14.5 GiB, k = 1
+    0.48 / 1.11 / 2.60 GiB; this estimate is 1.0-1.4x those from 26^3 on (below, the process's own
+    ~0.3 GiB dominates; before the fill factor it was 0.5-0.8x).
     """
     d = grid.dim
     cells = grid.num_cells
     if method == "dg":
         basis = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
-        return cells * 7 * (d * basis) ** 2 * 8 * 4
+        fill = max(1.0, cells ** (1 / d) / 12) if d == 3 else 1.0
+        return int(cells * 7 * (d * basis) ** 2 * 8 * 4 * fill)
     return cells * 8 * (len(control_offsets(d)) + 12 * d)
 
 
