@@ -37,9 +37,9 @@ TARGETS = (1e-2, 1e-3, 1e-4)
 SIZES = {
     "lame": {"staggered": [1 / 6, 1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
              "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.2, 0.14, 0.1, 0.07], "p2": [0.4, 0.28, 0.2, 0.14]},
-    # no staggered run on the ball: its displacement condition covers the whole surface, and the
-    # staggered method holds every sample inside a displacement region, so nothing would be solved
-    "ball": {"dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
+    # the ball's staggered error is noisy below 1 / 8 (0.03 to 0.10 over h = 1 / 5 .. 1 / 7: first-order
+    # surface tractions and the cap's rim); from 1 / 8 on it falls steadily
+    "ball": {"staggered": [1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
              "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.28, 0.2, 0.14, 0.1], "p2": [0.4, 0.28, 0.2, 0.14]},
     "annulus": {"staggered": [1 / 20, 1 / 40, 1 / 80, 1 / 160, 1 / 320], "p1": [0.05, 0.025, 0.0125, 0.00625],
                 "p2": [0.1, 0.05, 0.025, 0.0125]},
