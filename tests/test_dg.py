@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from benchmarks.problems import problem
 from engine.dg.elasticity import DGElasticity, Prescribed
 from engine.geometry.slicing import slice_cells
 from engine.grid import Grid, make_grid
@@ -103,20 +104,10 @@ def test_bz_is_inconsistent_and_approaches_the_solution_as_eta_grows():
 
 
 # ----------------------------------------------------------------------------- convergence
-AMP = 0.01
-
-
-def smooth(x):
-    X, Y, Z = x.T
-    return AMP * np.stack([np.sin(X) * np.cos(Y), np.sin(Y) * np.cos(Z), np.sin(Z) * np.cos(X)], axis=1)
-
-
-def smooth_force(x):
-    X, Y, Z = x.T
-    lap = -2 * np.stack([np.sin(X) * np.cos(Y), np.sin(Y) * np.cos(Z), np.sin(Z) * np.cos(X)], axis=1)
-    grad_div = np.stack([-np.sin(X) * (np.cos(Y) + np.cos(Z)), -np.sin(Y) * (np.cos(X) + np.cos(Z)),
-                         -np.sin(Z) * (np.cos(Y) + np.cos(X))], axis=1)
-    return -AMP * (MU * lap + (LAM + MU) * grad_div)
+# the ball problem of the accuracy benchmark: u = 0.01 (sin x cos y, sin y cos z, sin z cos x), E = 1, nu = 0.3
+BALL = problem("ball")
+assert (BALL.youngs_modulus, BALL.poisson_ratio) == (MAT.youngs_modulus, MAT.poisson_ratio)
+smooth, smooth_force = BALL.exact, BALL.body_force
 
 
 def test_p2_converges_at_third_order_on_a_sphere():
