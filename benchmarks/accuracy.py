@@ -7,14 +7,19 @@ Problems and probes: ``benchmarks.problems``. Methods: the staggered method, DG 
 (IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
 scikit-fem P1 / P2 on gmsh meshes, pyamg CG) at several mesh sizes. Every run is a whole job in
 its own spawned process (geometry, discretisation, solve, fields at the probes; no geometry
-cache): wall time measured around ``engine.simulate`` / ``run_peer`` and the process's peak RSS.
-Runs are alternated (repeat r of every configuration before repeat r + 1) and medians reported.
+cache), twice: the first job is *cold* (what one CLI run costs: Taichi loads and compiles its
+kernels), the second *warm* (what a job costs a service worker that has run one before; kernels
+loaded, nothing of the first job's geometry kept). Wall time is measured around
+``engine.simulate`` / ``run_peer``, imports excluded; the peer runs twice the same way. Peak RSS is
+the process's. Runs are alternated (repeat r of every configuration before repeat r + 1) and
+medians reported.
 
-Errors: relative L2 over the 1200 probes of the displacement and of the von Mises stress.
+Errors: relative L2 over the 1200 probes of the displacement and of the von Mises stress (of
+the warm job; ``rerun_difference`` says how far the cold job's probe displacements were from it).
 Output under --out: accuracy.json (every run and the medians), accuracy.png (log-log error vs
-time, one line per method and problem) and accuracy.md (the table: for each error target, each
-method's time over the peer's at that error, the faster of P1 / P2, interpolated log-log on the
-measured curves; > 1 means voxelastic is slower).
+time, one line per method and problem; solid warm, dotted cold) and accuracy.md (the tables, warm
+and cold: for each error target, each method's time over the peer's at that error, the faster of
+P1 / P2, interpolated log-log on the measured curves; > 1 means voxelastic is slower).
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import resource
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -50,42 +56,61 @@ LABELS = {"staggered": "voxelastic staggered", "dg1": "voxelastic DG k=1", "dg2"
 
 
 def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
-    from benchmarks.problems import problem, relative_l2
+    from benchmarks.problems import problem
     from engine import simulate
     from engine.geometry.cache import GeometryCache
 
     p = problem(problem_name)
     kind = {"staggered": {"kind": "staggered"}, "dg1": {"kind": "dg", "degree": 1},
             "dg2": {"kind": "dg", "degree": 2}}[method]
-    spec, mesh, functions = p.job(kind, h)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = None
-        if mesh is not None:
-            path = Path(tmp) / spec["geometry"]["mesh"].replace(".stl", ".ply")
-            spec["geometry"]["mesh"] = path.name
-            mesh.export(path)  # binary PLY keeps float64 vertices
-        t0 = time.perf_counter()
-        result = simulate(spec, path, cache=GeometryCache(None), functions=functions)
-        seconds = time.perf_counter() - t0
-    u = result.fields.probes["displacement"]
-    vm = result.fields.probes["von_mises"]
-    queue.put({"problem": problem_name, "method": method, "h": h, "seconds": seconds,
-               "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-               "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes)),
-               "iterations": result.solver.iterations, "residual": result.solver.residual,
-               "stages": result.solver.stage_times, "warnings": result.solver.warnings})
+
+    def job() -> dict:
+        spec, mesh, functions = p.job(dict(kind), h)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = None
+            if mesh is not None:
+                path = Path(tmp) / spec["geometry"]["mesh"].replace(".stl", ".ply")
+                spec["geometry"]["mesh"] = path.name
+                mesh.export(path)  # binary PLY keeps float64 vertices
+            t0 = time.perf_counter()
+            result = simulate(spec, path, cache=GeometryCache(None), functions=functions)
+            seconds = time.perf_counter() - t0
+        return {"seconds": seconds, "displacement": result.fields.probes["displacement"],
+                "von_mises": result.fields.probes["von_mises"], "iterations": result.solver.iterations,
+                "residual": result.solver.residual, "stages": result.solver.stage_times,
+                "warnings": result.solver.warnings}
+
+    queue.put(_cold_and_warm(p, problem_name, method, h, job))
+
+
+def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[], dict]) -> dict:
+    """The record of one configuration: ``job()`` run twice in this process, the second (warm) run's
+    errors and times, the first one's time as ``seconds_cold``."""
+    from benchmarks.problems import relative_l2
+
+    cold, warm = job(), job()
+    u = np.asarray(warm.pop("displacement"))
+    vm = np.asarray(warm.pop("von_mises"))
+    scale = float(np.abs(u).max()) or 1.0
+    return {**warm, "problem": problem_name, "method": method, "h": h,
+            "seconds_cold": cold["seconds"], "stages_cold": cold["stages"],
+            "rerun_difference": float(np.abs(np.asarray(cold["displacement"]) - u).max() / scale),
+            "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+            "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes))}
 
 
 def _peer(problem_name: str, method: str, h: float, queue) -> None:
     from benchmarks.peer import run_peer
+    from benchmarks.problems import problem
 
     # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py)
     order = int(method[1])
-    out = run_peer(problem_name, order, h, geometry="curved" if order == 2 else "straight")
-    out = {k: v for k, v in out.items() if k not in ("displacement", "von_mises")}
-    out.update({"problem": problem_name, "method": method, "h": h,
-                "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
-    queue.put(out)
+
+    def job() -> dict:
+        out = run_peer(problem_name, order, h, geometry="curved" if order == 2 else "straight")
+        return {k: v for k, v in out.items() if k not in ("error_u", "error_vm", "problem", "method", "h")}
+
+    queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job))
 
 
 def _one(problem_name: str, method: str, h: float, timeout: float) -> dict:
@@ -123,18 +148,21 @@ def medians(runs: list[dict]) -> list[dict]:
         if not ok:
             out.append({"problem": prob, "method": method, "h": h, "failed": rs[0]["failed"]})
             continue
-        row = {k: v for k, v in ok[0].items() if k not in ("seconds", "peak_rss_gib", "process_s", "stages")}
-        row["seconds"] = statistics.median(r["seconds"] for r in ok)
+        row = {k: v for k, v in ok[0].items()
+               if k not in ("seconds", "seconds_cold", "peak_rss_gib", "process_s", "stages", "stages_cold")}
+        for key in ("seconds", "seconds_cold"):
+            row[key] = statistics.median(r[key] for r in ok)
         row["peak_rss_gib"] = statistics.median(r["peak_rss_gib"] for r in ok)
         row["repeats"] = len(ok)
         out.append(row)
     return out
 
 
-def time_at(rows: list[dict], target: float, key: str = "error_u") -> float | None:
-    """Run time [s] at which a method's error curve reaches ``target``: log-log interpolation between
-    the two measured points around it; None when no measured run is that accurate."""
-    pts = sorted((r[key], r["seconds"]) for r in rows if "failed" not in r and np.isfinite(r[key]) and r[key] > 0)
+def time_at(rows: list[dict], target: float, key: str = "error_u", clock: str = "seconds") -> float | None:
+    """Run time [s] (``clock``: "seconds" warm, "seconds_cold") at which a method's error curve
+    reaches ``target``: log-log interpolation between the two measured points around it; None when
+    no measured run is that accurate."""
+    pts = sorted((r[key], r[clock]) for r in rows if "failed" not in r and np.isfinite(r[key]) and r[key] > 0)
     if not pts or min(e for e, _ in pts) > target:
         return None
     if max(e for e, _ in pts) <= target:
@@ -146,14 +174,14 @@ def time_at(rows: list[dict], target: float, key: str = "error_u") -> float | No
     return None
 
 
-def table(rows: list[dict], key: str = "error_u") -> str:
+def table(rows: list[dict], key: str = "error_u", clock: str = "seconds") -> str:
     """Markdown: per problem and error target, each method's time and its ratio to the faster peer."""
     lines = ["| problem | error target | " + " | ".join(LABELS[m] for m in LABELS) + " |",
              "|---|---|" + "---|" * len(LABELS)]
     for prob in dict.fromkeys(r["problem"] for r in rows):
         mine = [r for r in rows if r["problem"] == prob]
         for target in TARGETS:
-            times = {m: time_at([r for r in mine if r["method"] == m], target, key) for m in LABELS}
+            times = {m: time_at([r for r in mine if r["method"] == m], target, key, clock) for m in LABELS}
             peers = [t for m, t in times.items() if m in ("p1", "p2") and t is not None]
             peer = min(peers) if peers else None
             cells = []
@@ -174,18 +202,23 @@ def plot(rows: list[dict], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     problems = list(dict.fromkeys(r["problem"] for r in rows))
     fig, axes = plt.subplots(1, len(problems), figsize=(5.5 * len(problems), 4.5), squeeze=False)
     for ax, prob in zip(axes[0], problems):
-        for m, label in LABELS.items():
-            pts = sorted((r["seconds"], r["error_u"]) for r in rows
-                         if r["problem"] == prob and r["method"] == m and "failed" not in r)
-            if pts:
-                ax.loglog(*zip(*pts), "o-" if m in ("p1", "p2") else "s-", label=label)
+        for i, (m, label) in enumerate(LABELS.items()):
+            mine = [r for r in rows if r["problem"] == prob and r["method"] == m and "failed" not in r]
+            marker, colour = "o" if m in ("p1", "p2") else "s", f"C{i}"
+            for clock, style, name in (("seconds", "-", label), ("seconds_cold", ":", None)):
+                pts = [(r[clock], r["error_u"]) for r in sorted(mine, key=lambda r: -r["h"])]  # coarse to fine
+                if pts:
+                    ax.loglog(*zip(*pts), marker + style, color=colour, label=name, alpha=1.0 if name else 0.5,
+                              markersize=5 if name else 3)
         for target in TARGETS:
             ax.axhline(target, color="0.85", lw=0.8, zorder=0)
-        ax.set(title=prob, xlabel="whole-job wall time [s]", ylabel="relative L2 error of u at probes")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # decade labels only
+        ax.set(title=prob, xlabel="whole-job wall time [s] (solid: warm, dotted: cold)", ylabel="relative L2 error of u at probes")
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -216,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
             row["repeat"] = r
             runs.append(row)
             brief = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()
-                     if k in ("problem", "method", "h", "seconds", "error_u", "error_vm", "iterations", "failed")}
+                     if k in ("problem", "method", "h", "seconds", "seconds_cold", "error_u", "error_vm", "iterations",
+                              "failed")}
             print(json.dumps(brief), flush=True)
     rows = medians(runs)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -224,8 +258,10 @@ def main(argv: list[str] | None = None) -> int:
         {"machine": platform.processor() or platform.machine(), "repeats": repeats, "medians": rows, "runs": runs},
         indent=1, default=float))
     plot(rows, a.out / "accuracy.png")
-    text = (f"Displacement (relative L2 at the probes), time to reach the error; in brackets: over the faster "
-            f"peer's time.\n\n{table(rows)}\n\nVon Mises stress (relative L2 at the probes):\n\n"
+    text = (f"Displacement (relative L2 at the probes), time to reach the error, warm (a job in a process "
+            f"that has run one before: a service worker); in brackets: over the faster peer's time.\n\n"
+            f"{table(rows)}\n\nThe same, cold (the first job in a fresh process: one CLI run):\n\n"
+            f"{table(rows, clock='seconds_cold')}\n\nVon Mises stress (relative L2 at the probes), warm:\n\n"
             f"{table(rows, 'error_vm')}\n")
     (a.out / "accuracy.md").write_text(text)
     print(text)
