@@ -47,12 +47,27 @@ class Halfspaces:
         ``tolerance`` [m] of a plane count as on it (default ``ROUNDOFF`` times the largest coordinate
         or offset), so nothing is cut off or dropped by round-off alone."""
         facets = np.asarray(facets, dtype=float)
-        d = facets.shape[-1]
         if tolerance is None:
             scale = max(np.abs(facets).max(initial=0.0), np.abs(self.offsets).max(initial=0.0))
             tolerance = ROUNDOFF * max(scale, np.finfo(float).tiny)
+        # Most facets lie wholly inside or wholly outside some plane: only the rest are cut one by one.
+        side = facets @ self.normals.T - self.offsets  # [N, vertices, planes]
+        side = np.where(np.abs(side) <= tolerance, 0.0, side)
+        whole = np.all(side <= 0, axis=(1, 2))
+        cut = ~whole & ~np.any(np.all(side > 0, axis=1), axis=1)
+        if not cut.any():
+            return facets[whole], np.nonzero(whole)[0]
+        pieces, source = self._clip_each(facets[cut], np.nonzero(cut)[0], tolerance)
+        pieces = np.concatenate([facets[whole], pieces])
+        source = np.concatenate([np.nonzero(whole)[0], source])
+        order = np.argsort(source, kind="stable")  # in facet order, as if each had been cut
+        return pieces[order], source[order]
+
+    def _clip_each(self, facets: np.ndarray, index: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`clip` facet by facet, plane by plane (facets [N, d, d] numbered by ``index`` [N])."""
+        d = facets.shape[-1]
         poly = [facets[i] for i in range(len(facets))]
-        source = list(range(len(facets)))
+        source = [int(i) for i in index]
         for n, c in zip(self.normals, self.offsets):
             kept_poly, kept_source = [], []
             for p, s in zip(poly, source):

@@ -62,6 +62,14 @@ def stencil(grid: Grid, points: np.ndarray, a: int) -> tuple[np.ndarray, np.ndar
     outside the index box [0, n + 1)^d when a point is within h/2 of the grid's edge; callers treat
     those samples as inactive.
     """
+    base, frac = _lattice(grid, points, a)
+    corners = _corners(grid.dim)
+    return base[:, None, :] + corners[None], _corner_weights(frac)
+
+
+def _lattice(grid: Grid, points: np.ndarray, a: int) -> tuple[np.ndarray, np.ndarray]:
+    """The a-sample lattice cell of each point [N, d] [m]: (base index [N, d] int64, offset in it
+    [N, d] in [0, 1), units of h; base + offset is the point's lattice coordinate, exactly)."""
     d = grid.dim
     points = np.asarray(points, dtype=float)
     if points.ndim != 2 or points.shape[1] != d:
@@ -71,11 +79,23 @@ def stencil(grid: Grid, points: np.ndarray, a: int) -> tuple[np.ndarray, np.ndar
     shift = 0.5 - 0.5 * np.eye(d)[a]
     xi = (points - np.asarray(grid.origin)) / grid.spacing - shift  # lattice coordinates
     base = np.floor(xi)
-    frac = xi - base
-    corners = np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)  # [2^d, d]
-    index = base.astype(np.int64)[:, None, :] + corners[None]
-    weights = np.where(corners[None] == 1, frac[:, None, :], 1.0 - frac[:, None, :]).prod(axis=2)
-    return index, weights
+    return base.astype(np.int64), xi - base
+
+
+def _corners(d: int) -> np.ndarray:
+    """The 2^d corners of a lattice cell as offsets [2^d, d] int64 (last axis fastest)."""
+    return np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)
+
+
+def _corner_weights(frac: np.ndarray) -> np.ndarray:
+    """Multilinear weights [N, 2^d] at offsets frac [N, d] in a cell, of the corners in the order of
+    :func:`_corners`: the outer product of the per-axis weights (1 - frac, frac)."""
+    n, d = frac.shape
+    phi = np.ones((n,) + (1,) * d)
+    for b in range(d):
+        hat = np.stack([1.0 - frac[:, b], frac[:, b]], axis=1)  # [N, 2]: lower, upper side along b
+        phi = phi * hat.reshape((n,) + (1,) * b + (2,) + (1,) * (d - 1 - b))
+    return phi.reshape(n, 2**d)
 
 
 def interpolate(grid: Grid, points: np.ndarray, lookup: Lookup) -> np.ndarray:
@@ -162,25 +182,35 @@ def surface_loads(
             f"got {weights.shape} and {tractions.shape}"
         )
     loads = []
+    corners = _corners(d)
+    k = len(corners)
     for a in range(d):
-        index, phi = stencil(grid, points, a)
+        # Surface points far outnumber the cells they cross (~50 per cell on a fine mesh): samples are
+        # looked up, and forces gathered, per (cell, corner) slot, never per (point, corner) entry.
+        base, frac = _lattice(grid, points, a)
+        phi = _corner_weights(frac)  # [N, 2^d]
+        cells, cell_of = _unique_rows(base)
+        near = cells[:, None, :] + corners[None]  # [C, 2^d, d]: the samples of each cell
         load = weights * tractions[:, a]
         if active is not None:
-            phi = _renormalised(grid, index, phi, a, active, load, name)
-        keep = phi > 0
-        samples, inverse = _unique_rows(index[keep])
-        force = np.bincount(inverse, weights=(load[:, None] * phi)[keep], minlength=len(samples))
+            is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+            phi = _renormalised(phi, is_active[cell_of], a, load, name)
+        slot = (cell_of[:, None] * k + np.arange(k)).ravel()
+        keep = phi.ravel() > 0
+        summed = np.bincount(slot[keep], weights=(load[:, None] * phi).ravel()[keep], minlength=len(cells) * k)
+        used = np.bincount(slot[keep], minlength=len(cells) * k) > 0
+        samples, inverse = _unique_rows(near.reshape(-1, d)[used])
+        force = np.bincount(inverse, weights=summed[used], minlength=len(samples))
         if active is not None and free is not None:
-            samples, force = _balanced(grid, points, load, a, (index, phi, keep), (samples, force), active, free)
+            samples, force = _balanced(grid, load, a, (cells, cell_of, frac, phi), (samples, force), active, free)
         loads.append((samples, force))
     return loads
 
 
-def _renormalised(grid: Grid, index: np.ndarray, phi: np.ndarray, a: int, active: Active, load: np.ndarray,
-                  name: str) -> np.ndarray:
-    """Stencil weights phi [N, 2^d] over the active samples of ``index`` only, each row renormalised
-    to 1; a point with force ``load`` [N] [N] != 0 and no active sample is an error naming ``name``."""
-    is_active = _read(grid, index, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+def _renormalised(phi: np.ndarray, is_active: np.ndarray, a: int, load: np.ndarray, name: str) -> np.ndarray:
+    """Stencil weights phi [N, 2^d] over the active samples (``is_active`` [N, 2^d]) only, each row
+    renormalised to 1; a point with force ``load`` [N] [N] != 0 along axis ``a`` and no active
+    sample is an error naming ``name``."""
     phi = np.where(is_active, phi, 0.0)
     total = phi.sum(axis=1)
     lost = (total == 0) & (load != 0)
@@ -193,32 +223,37 @@ def _renormalised(grid: Grid, index: np.ndarray, phi: np.ndarray, a: int, active
     return phi / np.where(total > 0, total, 1.0)[:, None]
 
 
-def _balanced(grid: Grid, points: np.ndarray, load: np.ndarray, a: int, spread: tuple, summed: tuple,
-              active: Active, free: Free) -> tuple[np.ndarray, np.ndarray]:
+def _balanced(grid: Grid, load: np.ndarray, a: int, spread: tuple, summed: tuple, active: Active,
+              free: Free) -> tuple[np.ndarray, np.ndarray]:
     """(samples [K, d], force [K]) of component a with each free body's moment couple added.
 
-    spread: the points' (index [N, 2^d, d], renormalised weights phi [N, 2^d], keep = phi > 0);
-    summed: their forces summed per sample. The excess first moment of a body's load is
-    sum F_q phi_qI (x_I - x_q) over its samples (positions in h); the couple acts on the active
-    samples around the same points, each point offering room |F_q| spread by a hat of width 2h."""
-    index, phi, keep = spread
+    spread: the points' lattice cells (cells [C, d], cell_of [N]), offsets in them (frac [N, d]) and
+    renormalised corner weights phi [N, 2^d]; summed: their forces summed per sample. The excess
+    first moment of a body's load is sum F_q phi_qI (x_I - x_q) over its samples (positions in h);
+    the couple acts on the active samples around the same points, each point offering room |F_q|
+    spread by a hat of width 2h."""
+    cells, cell_of, frac, phi = spread
     samples, force = summed
     d = grid.dim
-    label = np.asarray(free(a, index[keep]), dtype=np.int64)  # per (point, sample) entry
+    corners = _corners(d)
+    near = (cells[:, None, :] + corners[None]).reshape(-1, d)
+    label = np.asarray(free(a, near), dtype=np.int64).reshape(len(cells), -1)[cell_of]  # [N, 2^d]
+    label = np.where(phi > 0, label, 0)
     if not (label > 0).any():
         return samples, force
-    shift = 0.5 - 0.5 * np.eye(d)[a]
-    xi = (points - np.asarray(grid.origin)) / grid.spacing - shift  # lattice coordinates [N, d]
-    rows = np.nonzero(keep)[0]
-    lever = (load[rows] * phi[keep])[:, None] * (index[keep] - xi[rows])  # force times (sample - point)
-    lever[:, a] = 0.0  # the lever along a does not turn f_a
     labels = np.unique(label[label > 0])
-    excess = np.stack([lever[label == k].sum(axis=0) for k in labels])  # [bodies, d] [N h]
+    moment = load[:, None] * phi  # force on each (point, corner) entry; its lever is corner - frac
+    excess = np.zeros((len(labels), d))  # [bodies, d] [N h]; the lever along a does not turn f_a
+    for b in (b for b in range(d) if b != a):
+        per_label = np.bincount(label.ravel(), weights=(moment * (corners[None, :, b] - frac[:, b, None])).ravel())
+        excess[:, b] = per_label[labels]
     size = np.abs(load).sum()
     held = [k for k, e in zip(labels, excess) if np.abs(e).max() > ROUNDOFF_MOMENT * size]
     if not held:
         return samples, force
-    room_index, room = _room(grid, xi, load, a, np.unique(rows[np.isin(label, held)]), active)
+    rows = np.nonzero(np.isin(label, held).any(axis=1))[0]
+    xi = cells[cell_of] + frac  # lattice coordinates [N, d] (exact: frac = xi - floor(xi))
+    room_index, room = _room(grid, xi, load, a, rows, active)
     room_label = np.asarray(free(a, room_index), dtype=np.int64)
     out_index, inverse = _unique_rows(np.concatenate([samples, room_index]))
     out = np.bincount(inverse[: len(samples)], weights=force, minlength=len(out_index))
