@@ -4,6 +4,7 @@
     .venv/bin/python -m benchmarks.stress --quick         # smaller grids (~2.5 min on 2 cores)
     .venv/bin/python -m benchmarks stress --quick --json stress.json
     .venv/bin/python -m benchmarks.stress --case offsets --case free_body --method dg
+    .venv/bin/python -m benchmarks.stress --case offsets --method staggered --cells 16 4   # refined
     .venv/bin/python -m pytest -q tests/test_stress.py    # the cheap cases as tests
 
 Every case runs on the staggered method and on DG (degree 2, interior penalty, eta = 20); the
@@ -61,7 +62,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -986,8 +987,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="write every row, with its numbers and full notes, to this file")
     ap.add_argument("--case", action="append", choices=list(CASES), help="run only these cases (repeatable)")
     ap.add_argument("--method", action="append", choices=list(METHODS), help="run only these methods (repeatable)")
+    ap.add_argument("--cells", type=int, nargs=2, metavar=("STAGGERED", "DG"),
+                    help="cells across the bar's width per method instead of the size's (a refinement study)")
     a = ap.parse_args(argv)
     size = QUICK if a.quick else DEFAULT
+    if a.cells:
+        if min(a.cells) < 1:
+            ap.error(f"--cells: expected two positive cell counts, got {a.cells}")
+        size = replace(size, name=f"{size.name}, cells {a.cells[0]} / {a.cells[1]}", staggered_cells=a.cells[0],
+                       dg_cells=a.cells[1])
     t0 = time.perf_counter()
 
     def echo(row: Row) -> None:
