@@ -224,6 +224,20 @@ def plot(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def _commit() -> str | None:
+    """The checkout's commit (short hash, "+" when files differ from it); None outside git."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=Path(__file__).parent, capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    try:
+        return git("rev-parse", "--short", "HEAD") + ("+" if git("status", "--porcelain", "--untracked-files=no") else "")
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks accuracy", description=__doc__.splitlines()[0])
     size = ap.add_mutually_exclusive_group()
@@ -255,8 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = medians(runs)
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "accuracy.json").write_text(json.dumps(
-        {"machine": platform.processor() or platform.machine(), "repeats": repeats, "medians": rows, "runs": runs},
-        indent=1, default=float))
+        {"machine": platform.processor() or platform.machine(), "commit": _commit(), "date": time.strftime("%Y-%m-%d"),
+         "repeats": repeats, "medians": rows, "runs": runs}, indent=1, default=float))
     plot(rows, a.out / "accuracy.png")
     text = (f"Displacement (relative L2 at the probes), time to reach the error, warm (a job in a process "
             f"that has run one before: a service worker); in brackets: over the faster peer's time.\n\n"
