@@ -9,6 +9,8 @@ SparseSolver is measured in docs/benchmarks.md (benchmarks/dg.py --solvers).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -17,6 +19,16 @@ try:  # MKL wheels exist for x86-64 only; elsewhere SuperLU does the work
     import pypardiso
 except (ImportError, OSError):  # pragma: no cover - exercised only where MKL is missing
     pypardiso = None
+
+
+def _pardiso(mtype: int):
+    """A pypardiso solver of matrix type ``mtype``. pypardiso looks for MKL's library at every
+    construction (``find_library``, then a recursive glob of the environment: ~0.2 s, paid per
+    factorisation, so per penalty doubling and per corotated fixed-point step); after the first
+    solver of a process the path found is handed on through pypardiso's own PYPARDISO_MKL_RT."""
+    solver = pypardiso.PyPardisoSolver(mtype=mtype)
+    os.environ.setdefault("PYPARDISO_MKL_RT", solver.libmkl._name)
+    return solver
 
 
 class NotPositiveDefinite(Exception):
@@ -36,7 +48,7 @@ class Cholesky:
         self.definite = definite
         if pypardiso is not None:
             self.backend = "pardiso"
-            self._solver = pypardiso.PyPardisoSolver(mtype=2 if definite else -2)
+            self._solver = _pardiso(2 if definite else -2)
             self._upper = sp.triu(A, format="csr")
             self._upper.sort_indices()
             try:
