@@ -236,9 +236,9 @@ def _balanced(grid: Grid, load: np.ndarray, a: int, spread: tuple, summed: tuple
     samples, force = summed
     d = grid.dim
     corners = _corners(d)
-    near = (cells[:, None, :] + corners[None]).reshape(-1, d)
-    label = np.asarray(free(a, near), dtype=np.int64).reshape(len(cells), -1)[cell_of]  # [N, 2^d]
-    label = np.where(phi > 0, label, 0)
+    near = cells[:, None, :] + corners[None]
+    label = _read(grid, near, a, lambda c, i: (np.asarray(free(c, i), dtype=np.int64), np.ones(len(i), bool)))[0]
+    label = np.where(phi > 0, label.astype(np.int64)[cell_of], 0)  # [N, 2^d] per (point, corner) entry
     if not (label > 0).any():
         return samples, force
     labels = np.unique(label[label > 0])
