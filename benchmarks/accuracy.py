@@ -218,7 +218,8 @@ def plot(rows: list[dict], path: Path) -> None:
         for target in TARGETS:
             ax.axhline(target, color="0.85", lw=0.8, zorder=0)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # decade labels only
-        ax.set(title=prob, xlabel="whole-job wall time [s] (solid: warm, dotted: cold)", ylabel="relative L2 error of u at probes")
+        ax.set(title=prob, xlabel="whole-job wall time [s] (solid: warm, dotted: cold)",
+               ylabel="relative L2 error of u at probes")
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -233,7 +234,8 @@ def _commit() -> str | None:
                               check=True).stdout.strip()
 
     try:
-        return git("rev-parse", "--short", "HEAD") + ("+" if git("status", "--porcelain", "--untracked-files=no") else "")
+        changed = git("status", "--porcelain", "--untracked-files=no")
+        return git("rev-parse", "--short", "HEAD") + ("+" if changed else "")
     except (OSError, subprocess.CalledProcessError):
         return None
 

@@ -113,7 +113,8 @@ def test_queue_full_is_429_then_the_wall_time_limit_fails_the_running_job(server
 
 
 def test_worker_memory_limit_fails_the_job_and_the_server_carries_on(server):
-    big = server.submit_ok(cantilever(128))  # peaks near 400 MB resident (the CLI: 403 MB; the small job 232 MB); the limit is 346 MB
+    # peaks near 400 MB resident (the CLI: 403 MB; the small job 232 MB); the limit is 346 MB
+    big = server.submit_ok(cantilever(128))
     # the worker field is set when the attempt starts and kept when it ends
     pid = worker_pid(server.wait(big, lambda j: j["worker"] is not None))
     done = server.wait(big, timeout=60)
