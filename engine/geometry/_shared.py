@@ -17,6 +17,9 @@ from engine.geometry.surface import Surface
 # its bounding-box extent^d.
 RIGID_TOL = 1e-9
 FLAT_TOL = 1e-12
+# Largest coordinate magnitude after placement [m]: volumes and moments multiply three
+# coordinates (and their powers), which overflow float64 long before the coordinates do.
+MAX_COORDINATE = 1e100
 
 
 def place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.ndarray, bool]:
@@ -44,8 +47,15 @@ def place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.nd
             )
         points = points @ r.T + t
         mirrored = bool(np.linalg.det(r) < 0)
+    # the message names the spec field (geometry.scale), so the service reports it there
     if not np.isfinite(points).all():
-        raise GeometryError(f"'{name}': coordinates overflow after scaling by {scale!r}")
+        raise GeometryError(f"geometry.scale: the coordinates of '{name}' overflow after scaling by {scale!r}")
+    reach = float(np.abs(points).max()) if points.size else 0.0
+    if reach > MAX_COORDINATE:
+        raise GeometryError(
+            f"geometry.scale: scaled by {scale!r}, '{name}' reaches coordinates of {reach:.3g} m;"
+            f" at most {MAX_COORDINATE:g} m is supported"
+        )
     return points, mirrored
 
 
@@ -65,9 +75,11 @@ def check_volume(surface: Surface, name: str) -> None:
     raise GeometryError(f"'{name}' encloses no {what}: the enclosed {what} is {volume:.6g} after repair")
 
 
-def describe_error(exc: Exception) -> str:
-    """A file reader's exception as one short line for a ``GeometryError`` message."""
-    lines = str(exc).strip().splitlines()
-    text = lines[0] if lines else ""
-    text = text if len(text) <= 200 else text[:197] + "..."
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+def describe_error(exc: Exception, what: str) -> str:
+    """Why a reader failed, in words for the user: never the exception's own text, which names
+    library internals (``StopIteration``, ``KeyError: 'y'``) instead of the problem."""
+    if isinstance(exc, UnicodeError):
+        return f"it is not a valid {what}: it holds text that is not valid UTF-8/ASCII"
+    if isinstance(exc, RecursionError):
+        return f"it is not a valid {what}: its structure is nested too deeply"
+    return f"it is not a valid {what}, or it is damaged or incomplete"

@@ -37,11 +37,12 @@ import numpy as np
 import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_tree, connected_components
-from trimesh.exchange.load import compressed_loaders, mesh_formats, path_formats
-from trimesh.resolvers import FilePathResolver
+from trimesh.exchange.load import mesh_formats, path_formats
+from trimesh.resolvers import FilePathResolver, ZipResolver
 
 from engine.errors import GeometryError
 from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, place
+from engine.geometry.inflate import DEFAULT_MAX_INFLATED, check_zip_container, container_suffix, inflate
 from engine.geometry.polygon import polygon_surface, read_drawing
 from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
@@ -50,7 +51,15 @@ from engine.geometry.winding import winding_number
 
 MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
 
-_COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D"
+_COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D; also inside .gz, .bz2, .xz, .zip, .tar"
+# formats that are ZIP archives themselves: their members are inflated by trimesh's loader
+_ZIP_FORMATS = {"3mf", "3dxml"}
+# a hint for formats whose files commonly fail for a reason the user can fix
+_HINTS = {
+    "gltf": "; a .gltf must embed its buffers as data: URIs (or upload a .glb, which holds everything in one file)",
+    "obj": "; each 'v' line needs three coordinates and each 'f' line vertex numbers that exist",
+    "ply": "; its header must declare the vertex properties x, y, z and a face list that the data then holds",
+}
 
 
 def load_surface(
@@ -60,6 +69,7 @@ def load_surface(
     dimension: int = 3,
     scale: float = 1.0,
     transform: np.ndarray | None = None,
+    max_inflated_bytes: int = DEFAULT_MAX_INFLATED,
 ) -> Surface:
     """Read, validate and repair a surface; raises ``GeometryError`` naming the problem.
 
@@ -67,7 +77,9 @@ def load_surface(
     or an in-memory ``trimesh.Trimesh`` / ``trimesh.Scene``. dimension: 3 for a triangle
     mesh, 2 for a planar drawing (SVG, DXF). scale: uniform factor (> 0) applied first;
     transform: rigid [d+1, d+1] homogeneous matrix applied after scaling. Units: whatever the
-    file uses times ``scale`` [m].
+    file uses times ``scale`` [m]. max_inflated_bytes: cap on what a compressed or archived file
+    (.gz, .bz2, .xz, .zip, .tar.*, and the ZIP inside a .3mf) may inflate to
+    (``engine.geometry.inflate.InflateLimitError`` beyond it).
     """
     if dimension not in (2, 3):
         raise GeometryError(f"dimension must be 2 or 3, got {dimension!r}")
@@ -79,8 +91,13 @@ def load_surface(
         vertices, faces, notes = _flatten_scene(scene)
     else:
         name, data, file_type, resolver = _resolve_source(source, filename)
+        files = [(name, data, file_type)]
+        if container_suffix(name):  # also meshio's .vol.gz & co: its own gunzip has no cap
+            files, resolver = _unpack(name, data, dimension, max_inflated_bytes)
+        elif file_type in _ZIP_FORMATS:
+            check_zip_container(name, data, max_inflated_bytes)
         if dimension == 2:
-            loops, notes = read_drawing(name, data, file_type)
+            loops, notes = read_drawing(*files[0])
             surface = polygon_surface(loops, scale=scale, transform=transform, name=name)
             surface.warnings[:0] = notes
             return surface
@@ -88,11 +105,11 @@ def load_surface(
             raise GeometryError(
                 f"cannot read mesh '{name}': '{file_type}' is a 2D drawing; use dimension 2"
             )
-        vertices, faces, notes = _flatten_scene(_read_scene(name, data, file_type, resolver))
+        vertices, faces, notes = _flatten_scenes([_read_scene(n, d, t, resolver) for n, d, t in files])
         if len(vertices) == 0:
             raise GeometryError(
                 f"cannot read mesh '{name}': no mesh found in the file"
-                f" (is it a valid {file_type.upper()} file?)"
+                f" (is it a valid {files[0][2].upper()} file?)"
             )
     surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name)
     surface.warnings[:0] = notes
@@ -169,8 +186,11 @@ def _resolve_source(source, filename: str | None):
         resolver = FilePathResolver(str(path))  # GLTF buffers, OBJ materials beside the file
     else:
         raise GeometryError(f"a mesh source must be a path or bytes, got {type(source).__name__}")
-    known = mesh_formats() | path_formats() | set(compressed_loaders)
+    known = mesh_formats() | path_formats()
     matches = [ft for ft in known if Path(name).name.lower().endswith("." + ft)]
+    container = container_suffix(name)
+    if container and not matches:
+        matches = [container.lstrip(".")]  # the format inside is known once it is unpacked
     if not matches:
         suffix = Path(name).suffix
         reason = f"unknown file type '{suffix}'" if suffix else "the file name has no extension"
@@ -180,6 +200,26 @@ def _resolve_source(source, filename: str | None):
     return name, data, max(matches, key=len), resolver
 
 
+def _unpack(name: str, data: bytes, dimension: int, limit: int):
+    """The mesh (or drawing) files inside a compressed or archived file: ([(name, bytes, type)],
+    a resolver over all its members for files that refer to others, such as .gltf buffers)."""
+    members = inflate(name, data, limit)
+    wanted = path_formats() if dimension == 2 else mesh_formats()
+    files = []
+    for member, content in members.items():
+        types = [ft for ft in wanted if member.lower().endswith("." + ft)]
+        if types and content:
+            files.append((member, content, max(types, key=len)))
+    if not files:
+        inside = ", ".join(sorted(members)[:5]) or "nothing"
+        kind = "drawing (svg, dxf)" if dimension == 2 else "mesh file"
+        raise GeometryError(f"cannot read mesh '{name}': no {kind} inside (found: {inside}); a compressed file "
+                            "must keep the mesh's own suffix, e.g. part.stl.gz")
+    if dimension == 2 and len(files) > 1:
+        raise GeometryError(f"cannot read drawing '{name}': {len(files)} drawings inside; upload one")
+    return files, ZipResolver({k: io.BytesIO(v) for k, v in members.items()})
+
+
 def _read_scene(name: str, data: bytes, file_type: str, resolver) -> trimesh.Scene:
     # process=False: no merging or reordering by trimesh; repair is done here, with warnings.
     extra = {"maintain_order": True} if file_type == "obj" else {}
@@ -187,8 +227,27 @@ def _read_scene(name: str, data: bytes, file_type: str, resolver) -> trimesh.Sce
         return trimesh.load_scene(
             io.BytesIO(data), file_type=file_type, resolver=resolver, process=False, **extra
         )
+    except MemoryError:
+        raise  # not the file's fault as such: the caller's memory limit reports it
     except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
-        raise GeometryError(f"cannot read mesh '{name}': {describe_error(exc)}") from None
+        # trimesh's own exceptions name its internals (StopIteration, KeyError: 'y'), not the problem
+        what = f"{file_type.upper()} file"
+        raise GeometryError(f"cannot read mesh '{name}': {describe_error(exc, what)}"
+                            f"{_HINTS.get(file_type, '')}") from None
+
+
+def _flatten_scenes(scenes: list[trimesh.Scene]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The mesh instances of several scenes (the files of an archive) as one surface."""
+    if len(scenes) == 1:
+        return _flatten_scene(scenes[0])
+    parts = [_flatten_scene(s) for s in scenes]
+    notes = sorted({n for _, _, ns in parts for n in ns if not n.startswith("combined")})
+    found = [(v, f) for v, f, _ in parts if len(v)]
+    if not found:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes
+    offsets = np.cumsum([0] + [len(v) for v, _ in found[:-1]])
+    notes.append(f"combined {len(found)} mesh files of the archive into one surface")
+    return np.concatenate([v for v, _ in found]), np.concatenate([f + o for (_, f), o in zip(found, offsets)]), notes
 
 
 def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[str]]:

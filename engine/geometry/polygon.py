@@ -68,7 +68,9 @@ def read_drawing(name: str, data: bytes, file_type: str) -> tuple[list[np.ndarra
         loops = [np.asarray(d, dtype=np.float64) for d in path.discrete]
         dangling = len(path.dangling)
     except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
-        raise GeometryError(f"cannot read drawing '{name}': {describe_error(exc)}") from None
+        if isinstance(exc, MemoryError):
+            raise
+        raise GeometryError(f"cannot read drawing '{name}': {describe_error(exc, file_type.upper() + ' drawing')}") from None
     if not loops:
         raise GeometryError(f"drawing '{name}' contains no closed curves")
     if loops[0].shape[1] == 3:
