@@ -50,7 +50,7 @@ class JobOut(BaseModel):
     cancel_requested: bool = False
     warnings: list[str] = Field(default_factory=list)
     error: str | None = Field(None, description="Why the job failed or stopped.")
-    error_kind: Literal["input", "limit", "worker_lost", "internal", "cancelled"] | None = None
+    error_kind: Literal["input", "limit", "storage", "worker_lost", "internal", "cancelled"] | None = None
     result: ResultInfo | None = None
     spec: dict[str, Any] = Field(description="The validated job spec, defaults filled in.")
     summary: dict[str, Any] = Field(default_factory=dict, description="Grid, facets, memory estimate, solver figures.")
