@@ -107,13 +107,21 @@ def make_grid(
         cell_size = float(extent.max()) / resolution
     if not (math.isfinite(cell_size) and cell_size > 0):
         raise GridError(f"grid.cell_size: must be a positive finite number, got {cell_size}")
-    cells = np.maximum(np.ceil(extent / cell_size - 1e-9), 1).astype(np.int64) + 2 * padding
-    total = int(np.prod(cells.astype(object)))
-    if max_cells is not None and total > max_cells:
+    # cell counts as Python integers: a huge resolution or a tiny cell size must be reported as
+    # too many cells, not wrap around int64 into a negative shape
+    with np.errstate(over="ignore"):
+        ratios = extent / cell_size
+    if not np.all(np.isfinite(ratios)):
+        raise GridError(f"grid.cell_size: {cell_size:g} is too small for a geometry of extent {extent.max():g}")
+    counts = [max(math.ceil(float(r) - 1e-9), 1) + 2 * int(padding) for r in ratios]
+    total = math.prod(counts)
+    if (max_cells is not None and total > max_cells) or max(counts) > 2**40:
+        shape = "x".join(str(n) if n < 10**12 else f"{n:.3g}" for n in counts)
         raise GridError(
-            f"grid: {'x'.join(map(str, cells.tolist()))} = {total} cells exceeds the limit of {max_cells}; "
-            "increase grid.cell_size or lower grid.resolution"
+            f"grid: {shape} = {total if total < 10**15 else f'{total:.3g}'} cells exceeds the limit of "
+            f"{max_cells if max_cells is not None else 2**40}; increase grid.cell_size or lower grid.resolution"
         )
+    cells = np.array(counts, dtype=np.int64)
     centre = 0.5 * (lower + upper)
     origin = centre - 0.5 * cell_size * cells
     return Grid(origin=tuple(float(o) for o in origin), spacing=float(cell_size), shape=tuple(int(n) for n in cells))

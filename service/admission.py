@@ -5,38 +5,56 @@ once instead of a failure minutes later: the spec (field paths from ``schemas.pa
 mesh (read and validated by the engine's own loader), the facet count, the grid size and the
 engine's memory estimate for that grid. Errors use FastAPI's shape, ``{"loc", "msg", "type"}``,
 so every 422 of the API reads the same.
+
+:func:`admit` is what the API calls: it runs :func:`check_submission` in a short-lived child
+process (``service.sandbox``) with an address-space and a time limit, so that no spec or mesh,
+however it inflates, can grow the API process. Messages never carry an exception's own text:
+they say which field or file is wrong and why, in words.
 """
 
 from __future__ import annotations
 
+import logging
+import os
 import re
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from schemas import JobSpec, SpecError, parse_job
+from schemas import SpecError, parse_job
 
 from .settings import Settings
 from .storage import display_name, mesh_suffix
 
+log = logging.getLogger("voxelastic.admission")
+
 
 @dataclass
 class Admitted:
-    """A submission that passed every check."""
+    """A submission that passed every check (plain values: it crosses a process boundary)."""
 
-    spec: JobSpec
     spec_json: str  # canonical JSON (defaults filled in)
     suffix: str  # the stored mesh's suffix ('' for a polygon job)
     triangles: int
     grid_shape: tuple[int, ...]
     memory_estimate: int
+    mesh_field: str | None  # geometry.mesh of the spec
+    precision: str
+    arch: str
 
 
 class Rejected(Exception):
     """A submission refused with ``status_code`` and FastAPI-style error entries."""
 
+    expected = True  # bad input, not a fault of the service: nothing to log
+
     def __init__(self, status_code: int, errors: list[dict[str, Any]]):
         super().__init__("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in errors))
         self.status_code, self.errors = status_code, errors
+
+    def __reduce__(self):  # pickled by the admission child: rebuild from the fields, not the message
+        return (Rejected, (self.status_code, self.errors))
 
 
 def _error(loc: list, msg: str, kind: str = "value_error") -> dict[str, Any]:
@@ -57,12 +75,39 @@ def _split_path(line: str) -> tuple[list, str]:
     return parts, m.group(2)
 
 
+# pydantic messages that read as if the input were something else; the rest are clear enough
+_PLAINER = {
+    "Unable to parse input string as an integer, exceeded maximum size":
+        "expected a whole number, and this one is too large",
+}
+
+
 def spec_errors(exc: SpecError) -> list[dict[str, Any]]:
     out = []
     for line in exc.errors:
         path, reason = _split_path(line)
+        reason = _PLAINER.get(reason, reason)
         out.append(_error(["body", "spec", *path], reason, "json_invalid" if line.startswith("(json)") else "value_error"))
     return out
+
+
+def parse_spec(spec_text: str | bytes):
+    """The validated spec, or :class:`Rejected` naming the problem (never a raw exception)."""
+    if not (spec_text.strip() if isinstance(spec_text, (str, bytes)) else spec_text):
+        raise Rejected(422, [_error(["body", "spec"], "the spec is empty: send the job spec as JSON in the 'spec' "
+                                    "form field or file part", "missing")])
+    try:
+        return parse_job(spec_text)
+    except SpecError as exc:
+        raise Rejected(422, spec_errors(exc)) from None
+    except RecursionError:
+        raise Rejected(422, [_error(["body", "spec"], "the spec nests arrays or objects too deeply (nearly 1000 "
+                                    "levels); a job spec needs fewer than 10", "json_invalid")]) from None
+    except ValueError as exc:
+        # json.loads: "Exceeds the limit (4300 digits) for integer string conversion"
+        reason = ("the spec holds an integer with more than 4300 digits" if "digits" in str(exc)
+                  else "the spec is not valid JSON")
+        raise Rejected(422, [_error(["body", "spec"], reason, "json_invalid")]) from None
 
 
 def _engine_error(message: str) -> dict[str, Any]:
@@ -74,18 +119,18 @@ def _engine_error(message: str) -> dict[str, Any]:
 
 
 def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: str | None, settings: Settings) -> Admitted:
-    """Validate a submission; raise :class:`Rejected` (422) naming every problem found.
+    """Validate a submission; raise :class:`Rejected` (422, 413) naming every problem found.
 
-    Runs the engine's geometry loading (no Taichi): call it off the event loop.
+    Runs the engine's geometry loading (no Taichi) in this process: the API calls :func:`admit`,
+    which runs this in a child process with memory and time limits.
     """
     from engine.errors import VoxelasticError
+    from engine.geometry.inflate import InflateLimitError
+    from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.pipeline import estimate_memory, load_geometry
 
-    try:
-        spec = parse_job(spec_text)
-    except SpecError as exc:
-        raise Rejected(422, spec_errors(exc)) from None
+    spec = parse_spec(spec_text)
 
     uses_mesh = spec.geometry.mesh is not None
     suffix = ""
@@ -101,14 +146,26 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     elif mesh:
         raise Rejected(422, [_error(["body", "mesh"], "this spec defines geometry.polygon; do not upload a mesh")])
 
+    # bytes, never a path: the loader then reads no sibling files; the name is for messages
+    name = display_name(mesh_filename or spec.geometry.mesh, suffix)
     try:
-        # bytes, never a path: the loader then reads no sibling files; the name is for messages
-        name = display_name(mesh_filename or spec.geometry.mesh, suffix)
-        surface, _ = load_geometry(spec, mesh if uses_mesh else None, filename=name)
+        if uses_mesh:
+            g = spec.geometry
+            surface = load_surface(mesh, filename=name, dimension=spec.dimension, scale=g.scale,
+                                   transform=g.transform, max_inflated_bytes=int(settings.max_inflated_bytes))
+        else:
+            surface, _ = load_geometry(spec, None)
+    except InflateLimitError as exc:
+        raise Rejected(413, [_error(["body", "mesh"], f"{exc} (VOXELASTIC_MAX_INFLATED_BYTES)", "too_large")]) from None
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
-    except Exception as exc:  # a loader crash on hostile bytes is still bad input, not a 500
-        raise Rejected(422, [_error(["body", "mesh"], f"cannot read the mesh: {type(exc).__name__}: {exc}")]) from None
+    except (MemoryError, RecursionError):
+        raise
+    except Exception:  # a loader crash on hostile bytes is still bad input, not a 500
+        log.warning("reading %s failed", name, exc_info=True)
+        what = f"'{name}'" if uses_mesh else "geometry.polygon"
+        raise Rejected(422, [_error(["body", "mesh"] if uses_mesh else ["body", "spec", "geometry", "polygon"],
+                                    f"cannot read {what}: it is damaged or not valid")]) from None
     triangles = len(surface.faces)
     if triangles > settings.max_triangles:
         raise Rejected(422, [_error(["body", "mesh"], f"{triangles} facets exceed the limit of {settings.max_triangles} "
@@ -127,5 +184,53 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
                                     f"a {shape} grid needs about {need / 2**30:.2f} GiB for method '{spec.method.kind}', "
                                     f"over this server's limit of {limit / 2**30:.2f} GiB per job; "
                                     "increase grid.cell_size or lower grid.resolution")])
-    return Admitted(spec=spec, spec_json=spec.to_json(), suffix=suffix, triangles=triangles,
-                    grid_shape=tuple(grid.shape), memory_estimate=need)
+    return Admitted(spec_json=spec.to_json(), suffix=suffix, triangles=triangles, grid_shape=tuple(grid.shape),
+                    memory_estimate=need, mesh_field=spec.geometry.mesh, precision=spec.solver.precision,
+                    arch=spec.solver.arch)
+
+
+def _check_files(spec_path: str, mesh_path: str | None, mesh_filename: str | None, settings: Settings) -> Admitted:
+    """:func:`check_submission` on the submission's files (run in the admission child)."""
+    spec_text = Path(spec_path).read_bytes()
+    mesh = Path(mesh_path).read_bytes() if mesh_path is not None else None
+    return check_submission(spec_text, mesh, mesh_filename, settings)
+
+
+def admit(spec_text: str | bytes, mesh: bytes | None, mesh_filename: str | None, settings: Settings) -> Admitted:
+    """:func:`check_submission` in a child process limited to ``admission_memory_bytes`` of address
+    space and ``admission_time_limit`` seconds; raises :class:`Rejected` for everything it refuses."""
+    from .sandbox import SandboxCrashed, SandboxMemory, SandboxTimeout, run_limited
+
+    scratch = Path(settings.data_dir) / "admission"
+    scratch.mkdir(parents=True, exist_ok=True)
+    # the child reads files, not pickled arguments: no second copy of the upload in this process
+    with tempfile.TemporaryDirectory(dir=scratch) as tmp:
+        spec_path = os.path.join(tmp, "spec.json")
+        with open(spec_path, "wb") as f:
+            f.write(spec_text.encode("utf-8", "surrogatepass") if isinstance(spec_text, str) else spec_text)
+        mesh_path = None
+        if mesh is not None:
+            mesh_path = os.path.join(tmp, "mesh")
+            with open(mesh_path, "wb") as f:
+                f.write(mesh)
+        try:
+            return run_limited(_check_files, (spec_path, mesh_path, mesh_filename, settings),
+                               memory_bytes=settings.admission_memory_bytes, time_limit=settings.admission_time_limit)
+        except SandboxMemory:
+            raise Rejected(413, [_error(["body"], "reading the spec and the mesh needs more than "
+                                        f"{settings.admission_memory_bytes / 2**30:.2f} GiB of memory, this server's "
+                                        "limit (VOXELASTIC_ADMISSION_MEMORY_BYTES); send a smaller mesh", "too_large")]) from None
+        except SandboxTimeout:
+            raise Rejected(422, [_error(["body"], f"checking the spec and the mesh took longer than "
+                                        f"{settings.admission_time_limit:g} s, this server's limit "
+                                        "(VOXELASTIC_ADMISSION_TIME_LIMIT); send a smaller mesh", "too_slow")]) from None
+        except SandboxCrashed as exc:
+            log.warning("admission check of %s died: %s", mesh_filename, exc.detail)
+            raise Rejected(422, [_error(["body", "mesh"], "the mesh could not be read: its reader stopped "
+                                        "(a damaged file, or one too large to read within this server's limits)")]) from None
+        except Rejected:
+            raise
+        except Exception:  # noqa: BLE001 - whatever the input made the check raise, it is still a 4xx
+            log.exception("admission check of %s raised", mesh_filename)
+            raise Rejected(422, [_error(["body"], "the spec and the mesh could not be checked: one of them is "
+                                        "malformed in a way this server cannot name")]) from None

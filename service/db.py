@@ -11,6 +11,8 @@ from datetime import datetime
 
 from sqlalchemy import (
     JSON,
+    inspect,
+    text,
     Boolean,
     DateTime,
     Float,
@@ -50,6 +52,9 @@ class JobRow(Base):
     precision: Mapped[str] = mapped_column(String(8))
     arch: Mapped[str] = mapped_column(String(8))
     idempotency_key: Mapped[str | None] = mapped_column(String(255))
+    # the tenant: SHA-256 of the bearer token that submitted the job (never the token); NULL
+    # without authentication
+    owner: Mapped[str | None] = mapped_column(String(64), index=True)
     request_hash: Mapped[str] = mapped_column(String(64))
     # progress of the current attempt
     stage: Mapped[str | None] = mapped_column(String(32))
@@ -106,4 +111,22 @@ def make_engine(url: str) -> Engine:
     except (OperationalError, ProgrammingError, IntegrityError):
         # another process (API and workers start together) created the tables at the same moment
         Base.metadata.create_all(engine)
+    _add_missing_columns(engine)
     return engine
+
+
+# columns added after the first release: (name, SQL type); create_all does not alter a table
+_ADDED_COLUMNS = [("owner", "VARCHAR(64)")]
+
+
+def _add_missing_columns(engine: Engine) -> None:
+    """Bring a job table made by an older version up to date (nullable columns only)."""
+    present = {c["name"] for c in inspect(engine).get_columns(JobRow.__tablename__)}
+    for name, sql_type in _ADDED_COLUMNS:
+        if name in present:
+            continue
+        try:
+            with engine.begin() as conn:
+                conn.execute(text(f"ALTER TABLE {JobRow.__tablename__} ADD COLUMN {name} {sql_type}"))
+        except (OperationalError, ProgrammingError):
+            pass  # another process added it first

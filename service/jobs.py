@@ -9,11 +9,11 @@ import math
 import time
 from dataclasses import dataclass
 
-from .admission import check_submission
+from .admission import admit
 from .queue import Queue
 from .settings import Settings
 from .storage import Storage, display_name, new_job_id
-from .store import Job, JobStore, request_hash, utcnow
+from .store import Job, JobStore, request_hash, scoped_key, utcnow
 
 
 class QueueFull(Exception):
@@ -44,42 +44,46 @@ def submit(
     mesh: bytes | None,
     mesh_filename: str | None,
     idempotency_key: str | None,
+    owner: str | None = None,
 ) -> Submitted:
     """Check a submission, store its mesh and row (status queued) and hand it to the queue.
 
     Raises ``admission.Rejected`` (422), ``store.IdempotencyConflict`` (409), :class:`QueueFull`
-    (429) or :class:`QueueUnavailable` (503).
+    (429) or :class:`QueueUnavailable` (503). ``owner``: the hash of the submitting token
+    (:func:`service.store.owner_of`), None without authentication.
     """
-    admitted = check_submission(spec_text, mesh, mesh_filename, settings)
+    admitted = admit(spec_text, mesh, mesh_filename, settings)
     fingerprint = request_hash(admitted.spec_json, mesh or b"", admitted.suffix)
-    if idempotency_key is not None:
+    # keys are per tenant: another token's key must neither return nor reveal that tenant's job
+    stored_key = scoped_key(idempotency_key, owner) if idempotency_key is not None else None
+    if stored_key is not None:
         # a repeated request gets its job back even when the queue has filled up since
-        existing = store.for_idempotency_key(idempotency_key, fingerprint)
+        existing = store.for_idempotency_key(stored_key, fingerprint, shown_as=idempotency_key)
         if existing is not None:
             return Submitted(existing, False)
     queued = store.queued_count()
     if queued >= settings.max_queued:
         raise QueueFull(queued, retry_after(store, settings, queued))
 
-    spec = admitted.spec
     job = Job(
         id=new_job_id(),
         status="queued",
         created_at=utcnow(),
         spec=admitted.spec_json,
         mesh_suffix=admitted.suffix,
-        mesh_name=display_name(mesh_filename or spec.geometry.mesh, admitted.suffix) if mesh else "",
+        mesh_name=display_name(mesh_filename or admitted.mesh_field, admitted.suffix) if mesh else "",
         mesh_bytes=len(mesh or b""),
-        precision=spec.solver.precision,
-        arch=spec.solver.arch,
+        precision=admitted.precision,
+        arch=admitted.arch,
         request_hash=fingerprint,
-        idempotency_key=idempotency_key,
+        idempotency_key=stored_key,
+        owner=owner,
         summary={"triangles": admitted.triangles, "grid": list(admitted.grid_shape),
                  "memory_estimate_bytes": admitted.memory_estimate},
     )
     if mesh:
         storage.save_mesh(job.id, admitted.suffix, mesh)
-    stored, created = store.create(job)
+    stored, created = store.create(job, shown_key=idempotency_key)
     if not created:  # lost a race with the same Idempotency-Key
         storage.delete(job.id)
         return Submitted(stored, False)

@@ -45,7 +45,7 @@ def serve(host: str | None = None, port: int | None = None, log_level: str = "in
     logging.basicConfig(level=getattr(logging, log_level.upper(), logging.INFO),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     print(f"voxelastic service on http://{host}:{port} (queue={settings.queue}, workers={settings.workers}, "
-          f"data={settings.data_dir}, auth={'on' if settings.tokens else 'off'}); API docs at /docs",
+          f"data={settings.data_dir}, auth={'on' if settings.auth_enabled else 'off'}); API docs at /docs",
           file=sys.stderr, flush=True)
     # one uvicorn process: the local pool lives in it (more API processes would each start a pool)
     uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level, access_log=False,

@@ -70,17 +70,30 @@ class Settings(BaseSettings):
     )
     job_time_limit: float = Field(3600.0, gt=0, description="Wall time of one job attempt [s].")
     max_queued: int = Field(1000, ge=1, description="Queued jobs at which POST /jobs answers 429.")
+    max_inflated_bytes: int | None = Field(
+        None, ge=1, description="Largest size a compressed or archived mesh may inflate to (413 above); "
+        "default 4 x max_upload_bytes."
+    )
+    admission_memory_bytes: int = Field(
+        3 * 2**30, ge=64 * 2**20, description="Address space the process checking a submission may add "
+        "(it reads the spec and the mesh apart from the API process; 413 above)."
+    )
+    admission_time_limit: float = Field(120.0, gt=0, description="Wall time to check one submission [s] (422 above).")
 
     # --- access ---------------------------------------------------------------------------------
     tokens: Annotated[list[str], NoDecode] = Field(
         default_factory=list, repr=False, description="Bearer tokens (comma-separated); empty = no authentication."
+    )
+    admin_tokens: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, repr=False, description="Bearer tokens that see and manage every tenant's jobs "
+        "(comma-separated; they also authenticate)."
     )
 
     # --- server ---------------------------------------------------------------------------------
     host: str = Field("127.0.0.1", description="voxelastic serve: bind address.")
     port: int = Field(8000, ge=0, le=65535, description="voxelastic serve: port.")
 
-    @field_validator("tokens", mode="before")
+    @field_validator("tokens", "admin_tokens", mode="before")
     @classmethod
     def _split_tokens(cls, value: object) -> object:
         # a comma-separated environment variable; JSON lists would force quoting secrets in shells
@@ -94,7 +107,14 @@ class Settings(BaseSettings):
             self.worker_memory_bytes = int(0.8 * _physical_memory() / self.workers)
         if self.max_job_memory_bytes is None:
             self.max_job_memory_bytes = self.worker_memory_bytes
+        if self.max_inflated_bytes is None:
+            self.max_inflated_bytes = 4 * self.max_upload_bytes
         return self
+
+    @property
+    def auth_enabled(self) -> bool:
+        """Whether requests need a bearer token (and jobs belong to the token that submitted them)."""
+        return bool(self.tokens or self.admin_tokens)
 
     @property
     def db_url(self) -> str:

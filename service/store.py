@@ -70,6 +70,7 @@ class Job:
     finished_at: datetime | None = None
     heartbeat_at: datetime | None = None
     idempotency_key: str | None = None
+    owner: str | None = None
     stage: str | None = None
     fraction: float = 0.0
     iterations: int | None = None
@@ -112,6 +113,18 @@ def request_hash(spec_text: str, mesh: bytes, suffix: str) -> str:
     for part in (spec_text.encode(), suffix.encode(), mesh):
         h.update(hashlib.sha256(part).digest())
     return h.hexdigest()
+
+
+def owner_of(token: str) -> str:
+    """The tenant a bearer token stands for, as stored with its jobs: a hash, never the token."""
+    return hashlib.sha256(b"voxelastic-owner\0" + token.encode()).hexdigest()
+
+
+def scoped_key(key: str, owner: str | None) -> str:
+    """An Idempotency-Key as stored: per tenant, so equal keys of two tenants never meet."""
+    if owner is None:
+        return key
+    return "t:" + hashlib.sha256(f"{owner}\0{key}".encode()).hexdigest()
 
 
 class IdempotencyConflict(Exception):
@@ -186,9 +199,19 @@ class JobStore:
             row = s.get(JobRow, job_id)
             return _snapshot(row) if row is not None else None
 
-    def list(self, *, limit: int, offset: int, status: str | None = None) -> tuple[list[Job], int]:
-        """Jobs newest first and how many match in all."""
+    def get_owned(self, job_id: str, owner: str | None, everyone: bool = False) -> Job | None:
+        """The job if ``owner`` submitted it (any job when ``everyone``); else None, as if absent."""
+        job = self.get(job_id)
+        if job is None or everyone or job.owner == owner:
+            return job
+        return None
+
+    def list(self, *, limit: int, offset: int, status: str | None = None, owner: str | None = None,
+             everyone: bool = True) -> tuple[list[Job], int]:
+        """Jobs newest first and how many match in all; only ``owner``'s unless ``everyone``."""
         where = [JobRow.status == status] if status else []
+        if not everyone:
+            where.append(JobRow.owner == owner if owner is not None else JobRow.owner.is_(None))
         with Session(self.engine) as s:
             total = s.scalar(select(func.count()).select_from(JobRow).where(*where)) or 0
             rows = s.scalars(
@@ -237,16 +260,16 @@ class JobStore:
 
     # --- creation and deletion ----------------------------------------------------------------
 
-    def create(self, job: Job) -> tuple[Job, bool]:
+    def create(self, job: Job, shown_key: str | None = None) -> tuple[Job, bool]:
         """Insert ``job`` (status queued); with an Idempotency-Key already used, the earlier job.
 
         Returns (job, created). Raises :class:`IdempotencyConflict` when the key was used for a
-        different submission.
+        different submission (``shown_key``: the key as the client sent it, for the message).
         """
         if job.idempotency_key is not None:
             existing = self._by_key(job.idempotency_key)
             if existing is not None:
-                return self._same_request(existing, job), False
+                return self._same_request(existing, job, shown_key), False
         row = JobRow(**{name: getattr(job, name) for name in _FIELDS})
         try:
             with Session(self.engine) as s, s.begin():
@@ -258,15 +281,15 @@ class JobStore:
             existing = self._by_key(job.idempotency_key) if job.idempotency_key else None
             if existing is None:
                 raise
-            return self._same_request(existing, job), False
+            return self._same_request(existing, job, shown_key), False
         return job, True
 
-    def for_idempotency_key(self, key: str, fingerprint: str) -> Job | None:
+    def for_idempotency_key(self, key: str, fingerprint: str, shown_as: str | None = None) -> Job | None:
         """The job submitted earlier with ``key``, None if none; IdempotencyConflict on other content."""
         existing = self._by_key(key)
         if existing is not None and existing.request_hash != fingerprint:
             raise IdempotencyConflict(
-                f"Idempotency-Key {key!r} was used for job {existing.id} with a different spec or mesh"
+                f"Idempotency-Key {shown_as or key!r} was used for job {existing.id} with a different spec or mesh"
             )
         return existing
 
@@ -276,10 +299,11 @@ class JobStore:
             return _snapshot(row) if row is not None else None
 
     @staticmethod
-    def _same_request(existing: Job, job: Job) -> Job:
+    def _same_request(existing: Job, job: Job, shown_key: str | None = None) -> Job:
         if existing.request_hash != job.request_hash:
             raise IdempotencyConflict(
-                f"Idempotency-Key {job.idempotency_key!r} was used for job {existing.id} with a different spec or mesh"
+                f"Idempotency-Key {shown_key or job.idempotency_key!r} was used for job {existing.id} "
+                "with a different spec or mesh"
             )
         return existing
 

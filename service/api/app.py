@@ -7,14 +7,21 @@
 from __future__ import annotations
 
 import logging
+import re
+import threading
+from functools import lru_cache
 from contextlib import asynccontextmanager
 
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import FormData
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from .. import sandbox
 from ..queue import make_queue
 from ..settings import Settings, get_settings
 from ..storage import Storage
@@ -26,7 +33,8 @@ log = logging.getLogger("voxelastic.api")
 
 DESCRIPTION = """Simulation jobs of voxelastic: submit a job spec with its mesh, follow its
 progress, download the HDF5 result (+ XDMF sidecar). With `VOXELASTIC_TOKENS` set, every endpoint
-but `/health` needs `Authorization: Bearer <token>`."""
+but `/health` needs `Authorization: Bearer <token>`, and a job is visible only to the token that
+submitted it (others get 404); tokens in `VOXELASTIC_ADMIN_TOKENS` see every job."""
 
 
 class UploadLimit:
@@ -93,6 +101,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = JobStore(settings.db_url)
         storage = Storage(settings.data_dir)
         queue = make_queue(store, storage, settings)
+        # the admission checks' forkserver imports the engine (~1 s): meanwhile the API starts
+        threading.Thread(target=sandbox.start, name="admission-forkserver", daemon=True).start()
         await run_in_threadpool(queue.start)
         app.state.settings, app.state.store, app.state.storage, app.state.queue = settings, store, storage, queue
         log.info("voxelastic service: queue=%s, data in %s", queue.backend, settings.data_dir)
@@ -123,7 +133,48 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
         # the same compact shape as our own 422s; echoing the input back would return whole uploads
-        detail = [{"loc": list(e.get("loc", ())), "msg": e.get("msg", ""), "type": e.get("type", "")} for e in exc.errors()]
+        detail = [_plain(e, exc.body) for e in exc.errors()]
         return JSONResponse({"detail": detail}, status_code=422)
 
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 405:
+            # Starlette's Allow names the methods of the first route that matched the path only
+            # (GET of /jobs/{id}); a client must learn every method the path has (DELETE too)
+            allowed = _allowed_methods(request)
+            if allowed:
+                exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
+        return await http_exception_handler(request, exc)
+
     return app
+
+
+def _plain(error: dict, body: object) -> dict:
+    """A request-validation error in our shape; an empty spec field says so instead of 'Field required'
+    (FastAPI treats an empty form field as a missing one)."""
+    loc, msg, kind = list(error.get("loc", ())), error.get("msg", ""), error.get("type", "")
+    if loc == ["body", "spec"] and kind == "missing":
+        if isinstance(body, FormData) and "spec" in body:
+            msg = "the spec is empty: send the job spec as JSON in the 'spec' form field or file part"
+        else:
+            msg = "required: send the job spec as JSON in a 'spec' form field or file part"
+    return {"loc": loc, "msg": msg, "type": kind}
+
+
+def _allowed_methods(request: Request) -> list[str]:
+    """Every method the API documents for the request's path (HEAD wherever GET is)."""
+    methods: set[str] = set()
+    for template, operations in request.app.openapi().get("paths", {}).items():
+        if _template_regex(template).fullmatch(request.url.path):
+            methods |= {m.upper() for m in operations if m.upper() in _METHODS}
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
+
+
+_METHODS = {"GET", "PUT", "POST", "DELETE", "PATCH", "HEAD", "OPTIONS", "TRACE"}
+
+
+@lru_cache(maxsize=64)
+def _template_regex(template: str) -> re.Pattern:
+    return re.compile(re.sub(r"\\\{[^/]+?\\\}", "[^/]+", re.escape(template)))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hmac
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
@@ -11,7 +12,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from ..queue import Queue
 from ..settings import Settings
 from ..storage import JOB_ID_PATTERN, Storage
-from ..store import Job, JobStore
+from ..store import Job, JobStore, owner_of
 
 
 def get_settings(request: Request) -> Settings:
@@ -38,17 +39,31 @@ QueueDep = Annotated[Queue, Depends(get_queue)]
 _bearer = HTTPBearer(auto_error=False, description="Required when the server has VOXELASTIC_TOKENS set.")
 
 
+@dataclass(frozen=True)
+class Principal:
+    """Who is asking: the tenant (hash of its token; None without authentication) and whether it
+    sees every tenant's jobs (an admin token, or a server without tokens)."""
+
+    owner: str | None
+    everyone: bool
+
+
+def _matches(given: bytes, tokens: list[str]) -> bool:
+    # every token compared in constant time: no early exit that leaks which one matched
+    return any([hmac.compare_digest(given, t.encode()) for t in tokens])
+
+
 def require_token(
     settings: SettingsDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-) -> None:
+) -> Principal:
     """401 unless no tokens are configured or the request carries one of them as a Bearer token."""
-    if not settings.tokens:
-        return
+    if not settings.auth_enabled:
+        return Principal(owner=None, everyone=True)
     if credentials is not None and credentials.scheme.lower() == "bearer":
         given = credentials.credentials.encode()
-        # compare against every token in constant time: no early exit that leaks which matched
-        if any([hmac.compare_digest(given, t.encode()) for t in settings.tokens]):
-            return
+        admin, tenant = _matches(given, settings.admin_tokens), _matches(given, settings.tokens)
+        if admin or tenant:
+            return Principal(owner=owner_of(credentials.credentials), everyone=admin)
     raise HTTPException(
         status.HTTP_401_UNAUTHORIZED,
         detail="missing or invalid bearer token",
@@ -56,12 +71,14 @@ def require_token(
     )
 
 
+PrincipalDep = Annotated[Principal, Depends(require_token)]
 JobId = Annotated[str, Path(pattern=JOB_ID_PATTERN, description="Job id (22 URL-safe characters).")]
 
 
-def get_job(job_id: JobId, store: StoreDep) -> Job:
-    """The job named in the path, or 404."""
-    job = store.get(job_id)
+def get_job(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
+    """The job named in the path if the caller may see it, else 404 (another tenant's job is absent,
+    not forbidden: a 403 would confirm that the id exists)."""
+    job = store.get_owned(job_id, principal.owner, principal.everyone)
     if job is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job_id}")
     return job

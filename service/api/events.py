@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import time
 from collections.abc import AsyncIterator
 
@@ -31,6 +32,13 @@ KEEPALIVE = 15.0  # a comment line this often keeps proxies from closing an idle
 def _snapshot(job) -> str:
     # the job as GET /jobs/{id} shows it, less the spec: that never changes and is the bulk of it
     return job_out(job).model_dump_json(exclude={"spec"})
+
+
+def last_seen(header: str | None) -> int | None:
+    """The revision a reconnecting client saw, from its Last-Event-ID; None (send everything) for
+    anything that is not one of our ids: a client may send ``null`` or an id of another stream."""
+    value = (header or "").strip()
+    return int(value) if re.fullmatch(r"[0-9]{1,18}", value) else None
 
 
 def format_event(event: str, data: str, event_id: int | None = None) -> str:

@@ -10,8 +10,8 @@ from fastapi.responses import FileResponse, StreamingResponse
 from ...admission import Rejected
 from ...jobs import QueueFull, QueueUnavailable, cancel_or_delete, submit
 from ...store import IdempotencyConflict, JobStatus
-from ..deps import JobDep, QueueDep, SettingsDep, StorageDep, StoreDep
-from ..events import job_events
+from ..deps import JobDep, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
+from ..events import job_events, last_seen
 from ..models import JobOut, JobPage, job_out
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
@@ -32,7 +32,8 @@ _ERRORS = {
     responses={
         **_ERRORS,
         409: {"description": "Idempotency-Key reused for a different submission."},
-        413: {"description": "Request body over VOXELASTIC_MAX_UPLOAD_BYTES."},
+        413: {"description": "Request body over VOXELASTIC_MAX_UPLOAD_BYTES, a compressed mesh inflating past "
+                             "VOXELASTIC_MAX_INFLATED_BYTES, or reading it past VOXELASTIC_ADMISSION_MEMORY_BYTES."},
         422: {"description": "Invalid spec or mesh, too many facets, grid over the memory limit (field path + reason)."},
         429: {"description": "Queue full; see Retry-After."},
         503: {"description": "The job queue (broker) is unavailable."},
@@ -45,6 +46,7 @@ def create_job(
     store: StoreDep,
     storage: StorageDep,
     queue: QueueDep,
+    principal: PrincipalDep,
     spec: Annotated[
         UploadFile | str, Form(description="The job spec as JSON (a text field or a file part; schemas/json/job.schema.json).")
     ],
@@ -57,7 +59,8 @@ def create_job(
     spec_text = spec if isinstance(spec, str) else spec.file.read()  # a text field, or a file part
     try:
         done = submit(store, storage, queue, settings, spec_text=spec_text, mesh=data,
-                      mesh_filename=mesh.filename if mesh is not None else None, idempotency_key=idempotency_key)
+                      mesh_filename=mesh.filename if mesh is not None else None, idempotency_key=idempotency_key,
+                      owner=principal.owner)
     except Rejected as exc:
         raise HTTPException(exc.status_code, detail=exc.errors) from None
     except IdempotencyConflict as exc:
@@ -77,11 +80,13 @@ def create_job(
 def list_jobs(
     request: Request,
     store: StoreDep,
+    principal: PrincipalDep,
     limit: Annotated[int, Query(ge=1, le=200)] = 50,
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
     status_: Annotated[JobStatus | None, Query(alias="status")] = None,
 ) -> JobPage:
-    items, total = store.list(limit=limit, offset=offset, status=status_.value if status_ else None)
+    items, total = store.list(limit=limit, offset=offset, status=status_.value if status_ else None,
+                              owner=principal.owner, everyone=principal.everyone)
     nxt = None
     if offset + len(items) < total:
         nxt = str(request.url.include_query_params(offset=offset + limit, limit=limit))
@@ -99,10 +104,15 @@ def get_job(job: JobDep) -> JobOut:
     summary="Server-sent events of a job until it ends",
 )
 def job_event_stream(
-    job: JobDep, store: StoreDep, last_event_id: Annotated[int | None, Header(ge=0, le=2**62)] = None
+    job: JobDep,
+    store: StoreDep,
+    last_event_id: Annotated[
+        str | None, Header(max_length=64, description="The id of the last event seen (a reconnecting client); "
+                                                      "anything but a revision number is ignored.")
+    ] = None,
 ) -> StreamingResponse:
     return StreamingResponse(
-        job_events(store, job.id, last_event_id),
+        job_events(store, job.id, last_seen(last_event_id)),
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
     )

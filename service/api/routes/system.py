@@ -37,7 +37,8 @@ def health(request: Request, store: StoreDep, queue: QueueDep) -> JSONResponse:
 @router.get(
     "/metrics",
     response_class=Response,
-    responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format 0.0.4."}},
+    responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format 0.0.4."},
+               401: {"description": "Missing or invalid bearer token (when tokens are configured)."}},
     summary="Prometheus metrics: jobs by status, durations, queue length",
 )
 def get_metrics(store: StoreDep, queue: QueueDep) -> Response:
