@@ -30,6 +30,7 @@ import json
 import math
 import os
 import uuid
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +39,7 @@ import numpy as np
 
 from . import __version__
 from .errors import ResultFormatError
+from .guarded_file import GuardedFile
 from .grid import Grid
 
 FORMAT = "voxelastic-result"
@@ -337,11 +339,6 @@ def _write_h5(f: h5py.File, r: Result, nodes: bool) -> None:
         s.attrs["warnings"] = np.array(r.solver.warnings, dtype=h5py.string_dtype())
 
 
-def _fsync(path: Path) -> None:
-    with open(path, "rb+") as fh:
-        os.fsync(fh.fileno())
-
-
 def _fsync_dir(directory: Path) -> None:
     try:
         fd = os.open(directory, os.O_RDONLY)
@@ -351,6 +348,24 @@ def _fsync_dir(directory: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def estimate_result_bytes(shape: Sequence[int], fields: Sequence[str], *, levels: int = 1,
+                          surface_vertices: int = 0, probes: int = 0) -> int:
+    """Size of the result file before compression [bytes]: what a job needs free on the disk.
+
+    Every cell array is stored dense over the grid (``shape``): the volume fraction, the cell
+    corners for XDMF, and each of ``fields`` per level (the final state, plus one per step of a
+    quasi-static or dynamic job: ``levels`` = steps + 1); surface and probe values per level.
+    gzip shrinks empty cells to almost nothing, so real files are smaller; an upper bound is what
+    a check of free space wants.
+    """
+    dim = len(shape)
+    cells = int(np.prod(shape, dtype=np.int64))
+    corners = int(np.prod([n + 1 for n in shape], dtype=np.int64))
+    per_point = sum(max(1, len(components(name, dim))) for name in fields)
+    per_level = (cells + surface_vertices + probes) * per_point
+    return 8 * (cells + corners * dim + 3 * surface_vertices + levels * per_level) + 64 * 1024
 
 
 def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) -> Path:
@@ -372,11 +387,20 @@ def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) 
     tmp_h5 = path.with_name(f".{path.name}.{token}.tmp")
     tmp_xdmf = xdmf_path.with_name(f".{xdmf_path.name}.{token}.tmp")
     try:
-        with h5py.File(tmp_h5, "x") as f:
-            _write_h5(f, result, nodes=xdmf)
-            f.flush()
-            text = xdmf_document(f, path.name) if xdmf else None
-        _fsync(tmp_h5)
+        with open(tmp_h5, "x+b", buffering=0) as fh:
+            guard = GuardedFile(fh)
+            try:
+                with h5py.File(guard, "w") as f:
+                    _write_h5(f, result, nodes=xdmf)
+                    f.flush()
+                    text = xdmf_document(f, path.name) if xdmf else None
+            except BaseException as exc:
+                if guard.error is not None:  # what HDF5 tripped over after the disk said no
+                    raise guard.error from exc
+                raise
+            if guard.error is not None:
+                raise guard.error
+            os.fsync(fh.fileno())
         if text is not None:
             with open(tmp_xdmf, "x", encoding="utf-8") as fh:
                 fh.write(text)

@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 
 from .admission import admit
+from .faults import check_space, is_storage_fault, rejection, result_estimate
 from .queue import Queue
 from .settings import Settings
 from .storage import Storage, display_name, new_job_id
@@ -81,8 +82,17 @@ def submit(
         summary={"triangles": admitted.triangles, "grid": list(admitted.grid_shape),
                  "memory_estimate_bytes": admitted.memory_estimate},
     )
+    # 507 now rather than a failed write after the solve (issue 18)
+    check_space(storage.root, result_estimate(admitted.spec_json, admitted.grid_shape, admitted.triangles)
+                + len(mesh or b""), "this job's result")
     if mesh:
-        storage.save_mesh(job.id, admitted.suffix, mesh)
+        try:
+            storage.save_mesh(job.id, admitted.suffix, mesh)
+        except OSError as exc:
+            storage.delete(job.id)
+            if not is_storage_fault(exc):
+                raise
+            raise rejection(exc, "the uploaded mesh") from None
     stored, created = store.create(job, shown_key=idempotency_key)
     if not created:  # lost a race with the same Idempotency-Key
         storage.delete(job.id)

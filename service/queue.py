@@ -142,9 +142,15 @@ class LocalQueue:
         slots = sum(t.is_alive() for t in self._threads)
         processes = sum(1 for s in self._supervisors if s.process is not None and s.process.alive())
         busy = [s.job_id for s in self._supervisors if s.job_id]
-        ok = slots == self.settings.workers and not self._stopping.is_set()
-        return ok, {"backend": "local", "workers": self.settings.workers, "slots_alive": slots,
-                    "processes_alive": processes, "running": len(busy)}
+        errors = [s.start_error for s in self._supervisors if s.start_error]
+        # no worker process alive and the last start of each failed: every job would fail
+        cannot_start = processes == 0 and bool(self._supervisors) and len(errors) == len(self._supervisors)
+        ok = slots == self.settings.workers and not self._stopping.is_set() and not cannot_start
+        info = {"backend": "local", "workers": self.settings.workers, "slots_alive": slots,
+                "processes_alive": processes, "running": len(busy)}
+        if errors:
+            info["worker_error"] = errors[0]
+        return ok, info
 
 
 class CeleryQueue:

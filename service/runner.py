@@ -16,6 +16,7 @@ succeeded is the parent's business. Only engine modules import Taichi.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -25,6 +26,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
+
+from .faults import ERROR_KIND, describe, is_storage_fault
 
 # progress messages closer together than this are merged (the newest wins); stage changes always go
 PROGRESS_INTERVAL = 0.1
@@ -147,9 +150,17 @@ def run_task(task: Task, progress) -> tuple:
             limits=Limits(max_cells=task.max_cells, max_memory_bytes=task.max_memory_bytes, max_triangles=task.max_triangles),
         )
         staging = Path(task.staging_dir)
-        staging.mkdir(parents=True, exist_ok=True)
         t_write = time.perf_counter()
-        path = write_result(result, staging / task.result_name)
+        try:
+            staging.mkdir(parents=True, exist_ok=True)
+            path = write_result(result, staging / task.result_name)
+        except OSError as exc:
+            # a full disk, a file-size limit, a quota, a permission: the same on every retry, and
+            # the user's job is not at fault; say which (engine.output keeps HDF5 usable after it)
+            shutil.rmtree(staging, ignore_errors=True)
+            if not is_storage_fault(exc):
+                raise
+            return ("error", ERROR_KIND, describe(exc, "the result"))
         report = result.solver
         stage_times = dict(report.stage_times) if report else {}
         stage_times["write"] = time.perf_counter() - t_write

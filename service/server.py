@@ -8,6 +8,7 @@ import os
 import sys
 from pathlib import Path
 
+from . import faults
 from .settings import Settings
 
 
@@ -48,6 +49,8 @@ def serve(host: str | None = None, port: int | None = None, log_level: str = "in
           f"data={settings.data_dir}, auth={'on' if settings.auth_enabled else 'off'}); API docs at /docs",
           file=sys.stderr, flush=True)
     # one uvicorn process: the local pool lives in it (more API processes would each start a pool)
-    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level, access_log=False,
+    app = create_app(settings)
+    faults.install(app)  # 507 naming the cause when an upload cannot be stored (issue 18)
+    uvicorn.run(app, host=host, port=port, log_level=log_level, access_log=False,
                 timeout_graceful_shutdown=10)
     return 0

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import psutil
 
+from .faults import ERROR_KIND, describe, is_storage_fault
 from .runner import Task, worker_main
 from .settings import Settings
 from .storage import Storage
@@ -160,13 +161,21 @@ class Supervisor:
         self.process: WorkerProcess | None = None
         self.job_id: str | None = None  # the job running now (for health and shutdown)
         self.stopping = False  # set by a server shutdown: a lost job is released, not retried
+        # why the last worker process could not start (None once one has): /health reports it, so
+        # a server whose workers cannot run anything is not "ok" (issue 18: the image lacked libX11)
+        self.start_error: str | None = None
 
     def ensure_process(self, key: tuple[str, str]) -> WorkerProcess:
         if self.process is not None and (self.process.key != key or not self.process.alive()):
             self.process.stop()
             self.process = None
         if self.process is None:
-            self.process = WorkerProcess(key, self.settings)
+            try:
+                self.process = WorkerProcess(key, self.settings)
+            except WorkerStartError as exc:
+                self.start_error = str(exc)
+                raise
+            self.start_error = None
             log.info("%s: worker process %s started (arch=%s, precision=%s)", self.name, self.process.pid, *key)
         return self.process
 
@@ -236,6 +245,7 @@ class Supervisor:
                 elif kind == "done":
                     return self._succeeded(job, attempt, msg[1])
                 elif kind == "error":
+                    self.storage.clear_attempts(job.id)  # nothing of a failed attempt stays behind
                     self.store.fail(job.id, attempt, msg[2], msg[1])
                     return "failed"
             if pending is not None and (pending[0] != stage or now >= next_write):
@@ -282,7 +292,11 @@ class Supervisor:
         try:
             size = self.storage.publish(job.id, attempt)
         except OSError as exc:
-            self.store.fail(job.id, attempt, f"internal error: could not publish the result: {exc}", "internal")
+            self.storage.clear_attempts(job.id)
+            if is_storage_fault(exc):
+                self.store.fail(job.id, attempt, describe(exc, "the result"), ERROR_KIND)
+            else:
+                self.store.fail(job.id, attempt, f"internal error: could not publish the result: {exc}", "internal")
             return "failed"
         if self.store.succeed(job.id, attempt, result_bytes=size, summary=summary, warnings=summary.get("warnings", [])):
             return "succeeded"
