@@ -158,6 +158,9 @@ def _plain(error: dict, body: object) -> dict:
             msg = "the spec is empty: send the job spec as JSON in the 'spec' form field or file part"
         else:
             msg = "required: send the job spec as JSON in a 'spec' form field or file part"
+    elif loc == ["body", "mesh"] and kind != "missing":
+        # FastAPI's own words here name Python classes ("Expected UploadFile, received: <class 'str'>")
+        msg = "the mesh must be a file part (with a filename, e.g. part.stl), not a text field"
     return {"loc": loc, "msg": msg, "type": kind}
 
 
