@@ -2,7 +2,8 @@
 
 The life of a job, module by module::
 
-    POST /jobs        api.routes.jobs -> jobs.submit -> admission.check_submission (422 before work)
+    POST /jobs        api.routes.jobs -> jobs.submit -> admission.admit (422/413 before work):
+                      admission.check_submission in a sandbox child (memory + time limits)
                       storage.save_mesh, store.create (status queued), queue.enqueue
     a worker slot     queue.LocalQueue (or celery_app.run_job) -> store.claim
                       worker.Supervisor.run -> runner.worker_main in a spawned process
@@ -11,7 +12,9 @@ The life of a job, module by module::
     GET /jobs/{id}    api.routes.jobs, api.events (server-sent events), FileResponse (Range)
 
 ``settings.Settings`` holds every option (``VOXELASTIC_*``); ``server.serve`` is
-``voxelastic serve``. Imports flow one way: api -> jobs/queue/worker -> store/storage -> db;
+``voxelastic serve``. With tokens, ``api.deps.require_token`` names the tenant (a hash of the
+token) and ``store.get_owned``/``store.list`` show a job only to it (and to admin tokens).
+Imports flow one way: api -> jobs/queue/worker -> store/storage -> db;
 only ``runner`` (inside worker processes) reaches into the engine's solver, and Taichi is never
 imported here.
 """

@@ -233,3 +233,25 @@ def test_openapi_allow_and_last_event_id(server):
             assert r.status_code == 200, value
             body = "".join(r.iter_text())
         assert "event: end" in body and f'"id":"{job_id}"' in body
+
+
+def test_a_mesh_that_needs_more_memory_than_the_admission_limit_is_413(tmp_path, tmp_path_factory):
+    import trimesh
+
+    srv = Server(tmp_path / "data", shared_cache_dir(tmp_path_factory), workers=1,
+                 admission_memory_bytes=100 * 2**20)
+    srv.start()
+    try:
+        ball = trimesh.creation.icosphere(subdivisions=7).export(file_type="stl")  # 327,680 facets, 16 MB
+        spec = cantilever(16)
+        spec["geometry"]["mesh"], spec["boundaries"] = "ball.stl", []
+        t = time.monotonic()
+        err = only_error(post(srv.client, spec, ball, "ball.stl"), 413)
+        assert time.monotonic() - t < 20
+        assert err["loc"] == ["body"] and err["msg"].startswith(
+            "reading the spec and the mesh needs more than 0.10 GiB of memory, this server's limit "
+            "(VOXELASTIC_ADMISSION_MEMORY_BYTES)")
+        # the child that ran out is gone; the server and the next (small) job carry on
+        assert srv.wait(srv.submit_ok(cantilever(16)))["status"] == "succeeded"
+    finally:
+        srv.close()
