@@ -46,6 +46,7 @@ class Cholesky:
     def __init__(self, A: sp.spmatrix, *, definite: bool = True) -> None:
         self.n = A.shape[0]
         self.definite = definite
+        self._freed = False
         if pypardiso is not None:
             self.backend = "pardiso"
             self._solver = _pardiso(2 if definite else -2)
@@ -69,12 +70,33 @@ class Cholesky:
                 raise NotPositiveDefinite(f"{int(np.sum(diag <= 0))} non-positive pivots")
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        if self._freed:  # PARDISO would read released memory (or refactorise silently)
+            raise RuntimeError("this factorisation was freed")
         b = np.asarray(b, dtype=np.float64)
         if self.backend == "pardiso":
             return self._solver.solve(self._upper, b)
         return self._lu.solve(b)  # pragma: no cover
 
     def free(self) -> None:
-        """Release the factor's memory."""
-        if self.backend == "pardiso":
+        """Release the factor's memory now (idempotent).
+
+        PARDISO keeps the factor in MKL's own memory, which Python's garbage collector does not
+        see: a solver object that is merely dropped keeps it until the process exits. A corotated
+        DG solve refactorises per fixed-point iteration, so without this every iteration's factor
+        stayed resident (issue 18: +25 MB per iteration on a 10-cell torus, 19 GB after 100 at 20).
+        """
+        if getattr(self, "_freed", True):
+            return
+        self._freed = True
+        if getattr(self, "backend", None) == "pardiso" and hasattr(self, "_solver"):
             self._solver.free_memory(everything=True)
+        else:  # pragma: no cover - SuperLU's factor is ordinary Python-owned memory
+            self.__dict__.pop("_lu", None)
+
+    def __del__(self) -> None:
+        # also reached for a factorisation whose __init__ raised (a pivot that was not positive):
+        # its PARDISO handle holds memory too
+        try:
+            self.free()
+        except Exception:  # never raise from a finaliser (interpreter shutdown, MKL already unloaded)
+            pass
