@@ -285,12 +285,9 @@ def job(method: dict, h: float, boundaries: list, *, youngs: float = E0, nu: flo
 
 
 def clamp_depth(method: dict, h: float) -> float:
-    """Axial depth [m] of a clamp region. Staggered: the DOFs whose samples lie inside are held, so
-    the region must reach past a sample of every component wherever the cut falls (u_x samples on
-    the cell faces, u_y and u_z at mid-cell): over h / 2; 0.55 h never meets a sample at the swept
-    offsets (0.6 h would, at offset 0.4). DG: weakly on the surface patch inside, so the end face
-    alone (FACE_SLACK h beyond it)."""
-    return 0.55 * h if method["kind"] == "staggered" else FACE_SLACK * h
+    """Axial depth [m] of a clamp region: both methods hold the surface patch inside it, so the end
+    face alone (FACE_SLACK h beyond it)."""
+    return FACE_SLACK * h
 
 
 @dataclass

@@ -143,15 +143,6 @@ def make_region(spec, dim: int) -> Region:
     raise VoxelasticError(f"region: unknown shape {spec!r}")
 
 
-def require_selection(count: int, what: str, name: str) -> None:
-    """A boundary condition that selects nothing is an error naming it (a slab thinner than a cell
-    is the usual cause)."""
-    if count == 0:
-        raise VoxelasticError(
-            f"{name}: the region selects no {what}; a slab thinner than a cell is the usual cause - widen it"
-        )
-
-
 def _side(p: np.ndarray, normal: np.ndarray, offset: float, tolerance: float) -> np.ndarray:
     """Signed distances [k] of points p [k, d] to the plane, snapped to 0 within ``tolerance``."""
     side = p @ normal - offset

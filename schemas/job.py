@@ -35,7 +35,7 @@ from .base import (
     quoted,
     tag_dispatch,
 )
-from .regions import Region
+from .regions import Facing, Region
 
 ROTATION_TOLERANCE = 1e-6
 """Largest entry of |R^T R - I| accepted for the linear part of ``geometry.transform``."""
@@ -198,10 +198,14 @@ class _Boundary(SpecModel):
     kind: str  # declared first so that it leads in dumps and the schema; narrowed by each subclass
     name: str | None = Field(None, min_length=1, description="Label used in messages and results.")
     region: Region
+    facing: Facing | None = Field(
+        None, description="Optional: keep only the facets of the patch whose outward normal faces this way."
+    )
 
 
 class DisplacementBoundary(_Boundary):
-    """Prescribed displacement of the material inside the region; null components stay free."""
+    """Prescribed displacement of the surface patch (the mesh surface inside the region); null
+    components stay free."""
 
     model_config = TAGGED
     kind: Literal["displacement"] = "displacement"

@@ -67,6 +67,23 @@ class HalfspaceRegion(SpecModel):
     halfspace: Halfspace
 
 
+class Facing(SpecModel):
+    """Keeps only the facets of a patch whose outward normal lies within ``max_angle_deg`` of
+    ``direction`` (e.g. a bar's end face out of a half-space that also takes side strips along)."""
+
+    direction: Vector = Field(description="Direction the kept facets face (non-zero, need not be unit).")
+    max_angle_deg: float = Field(
+        gt=0, le=180, description="Largest angle [degrees] between a kept facet's outward normal and direction."
+    )
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, direction: tuple[float, ...]) -> tuple[float, ...]:
+        if math.hypot(*direction) == 0:
+            raise custom_error("zero_direction", "direction must be non-zero")
+        return direction
+
+
 class AllRegion(SpecModel):
     """Everything: all material (displacement) or the whole surface (traction, pressure)."""
 

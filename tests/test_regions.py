@@ -5,7 +5,8 @@ import pytest
 import trimesh
 
 from engine.errors import VoxelasticError
-from engine.regions import Ball, make_region, require_selection
+from engine.boundary import select_patch
+from engine.regions import Ball, make_region
 from schemas import parse_job
 
 
@@ -99,7 +100,11 @@ def test_2d_segments_are_clipped_exactly():
     np.testing.assert_allclose(pieces[0], [[0.25, 0], [1, 0]])  # direction kept
 
 
-def test_empty_selection_names_the_boundary():
-    require_selection(3, "surface", "boundaries.1 (tip_load)")
-    with pytest.raises(VoxelasticError, match=r"boundaries.1 \(tip_load\): the region selects no surface"):
-        require_selection(0, "surface", "boundaries.1 (tip_load)")
+def test_empty_selection_names_the_boundary_and_the_gap():
+    square = np.array([[[0.0, 0.0], [1.0, 0.0]], [[1.0, 0.0], [1.0, 1.0]]])
+    region = make_region(type("R", (), {"box": [[2.0, -1.0], [3.0, 2.0]]})(), 2)
+    with pytest.raises(VoxelasticError, match=r"boundaries.1 \(tip_load\): the region holds no part of the mesh surface "
+                                              r"\(its region is 1 m from the nearest surface vertex\)"):
+        select_patch(region, square, "boundaries.1 (tip_load)")
+    pieces, _ = select_patch(make_region(type("R", (), {"box": [[0.5, -1.0], [3.0, 2.0]]})(), 2), square, "b")
+    assert abs(np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum() - 1.5) < 1e-15

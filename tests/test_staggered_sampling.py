@@ -10,13 +10,8 @@ import trimesh
 from engine.errors import VoxelasticError
 from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
-from engine.staggered.sampling import (
-    boundary_tractions,
-    interpolate,
-    stencil,
-    surface_loads,
-    surface_quadrature,
-)
+from engine.boundary import boundary_tractions, surface_quadrature
+from engine.staggered.sampling import interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 
 GRIDS = {
@@ -360,7 +355,7 @@ def test_stress_loads_obey_the_divergence_theorem():
 def test_boundary_conditions_that_select_nothing_or_are_ambiguous_are_errors():
     sphere = surface_of(trimesh.creation.icosphere(subdivisions=1))
     far = Ball(np.array([10.0, 0.0, 0.0]), 0.5)
-    with pytest.raises(VoxelasticError, match="clamp plate: the region selects no surface"):
+    with pytest.raises(VoxelasticError, match="clamp plate: the region holds no part of the mesh surface"):
         boundary_tractions(sphere, far, 0.1, pressure=1.0, name="clamp plate")
     with pytest.raises(ValueError, match="push: give exactly one of traction, pressure or stress"):
         boundary_tractions(sphere, far, 0.1, pressure=1.0, traction=[0, 0, 1], name="push")

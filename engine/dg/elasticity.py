@@ -19,12 +19,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..boundary import Prescribed, hold_warnings, select_patch
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
 from ..material import Material, von_mises
 from ..output import FieldData
-from ..regions import require_selection
 from ..solvers.cg import SolveStats
 from ..solvers.direct import Cholesky, NotPositiveDefinite
 from ..solvers.rigid import UnbalancedLoadError
@@ -52,17 +52,6 @@ PIN_TOLERANCE = 1e-10  # a rigid mode is held when the Dirichlet patches see it 
 BALANCE_TOLERANCE = 1e-6
 COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per iteration
 COROTATED_MAX = 100
-
-
-@dataclass
-class Prescribed:
-    """Displacement ``value`` [3] (None: free component) or callable points [N, 3] -> [N, 3] [m] on
-    the surface inside ``region``; ``components`` says which are prescribed when value is callable."""
-
-    region: object
-    value: tuple | Callable
-    name: str
-    components: tuple[bool, ...] | None = None
 
 
 @dataclass
@@ -117,6 +106,7 @@ class DGElasticity:
         self.timings["element_blocks"] = time.perf_counter() - t
         t = time.perf_counter()
         self.patches = self._dirichlet_patches()
+        self.warnings += hold_warnings(self.prescribed, self.surface)
         self.load_vector = self._loads()
         self.timings["loads"] = time.perf_counter() - t
         self.modes = self._free_modes()
@@ -138,14 +128,10 @@ class DGElasticity:
         tris, elem, patch, masks, values, names = [], [], [], [], [], []
         count = 0
         for k, bc in enumerate(self.prescribed):
-            clipped, source = bc.region.clip(el.boundary_triangles)
-            require_selection(len(clipped), "surface", bc.name)
+            clipped, source = select_patch(bc.region, el.boundary_triangles, bc.name)
             owner = el.boundary_element[source]
             uniq, local = np.unique(owner, return_inverse=True)
-            if callable(bc.value):
-                comp = np.asarray(bc.components if bc.components is not None else (True,) * 3, dtype=bool)
-            else:
-                comp = np.array([v is not None for v in bc.value], dtype=bool)
+            comp = bc.mask(3)
             tris.append(clipped)
             elem.append(owner)
             patch.append(local + count)
@@ -171,10 +157,9 @@ class DGElasticity:
                 mean = basis.h**3 * np.einsum("eis,es->ei", basis.T, el.moments[:, :n])  # int psi_I dV
                 f += g[None, :, None] * mean[:, None, :]
         for load in self.surface_loads:
-            clipped, source = load.region.clip(el.boundary_triangles)
-            require_selection(len(clipped), "surface", load.name)
+            clipped, source = select_patch(load.region, el.boundary_triangles, load.name)
             sp_ = surface_points(clipped, el.boundary_element[source], self.degree + 3)
-            t = _tractions(load, sp_.points, sp_.normals)
+            t = load.tractions(sp_.points, sp_.normals)
             f += basis.tested(el.count, sp_.element, self._xi(sp_.element, sp_.points), sp_.weights[:, None] * t)
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
@@ -636,14 +621,6 @@ def _rigid_fields(x: np.ndarray) -> np.ndarray:
     r[:, 4, 0], r[:, 4, 2] = -x[:, 2], x[:, 0]
     r[:, 5, 1], r[:, 5, 2] = -x[:, 2], x[:, 1]
     return r
-
-
-def _tractions(load, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Traction [Q, 3] [Pa] of a surface load at points with unit outward normals."""
-    from ..staggered.sampling import tractions
-
-    return tractions(points, normals, name=load.name, traction=load.traction, pressure=load.pressure,
-                     stress=load.stress)
 
 
 def _point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import VoxelasticError
 
@@ -40,11 +41,14 @@ def rigid_modes(points: np.ndarray, axis: np.ndarray, center: np.ndarray | None 
     return np.stack(cols, axis=1)
 
 
-def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np.ndarray) -> list[np.ndarray]:
+def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np.ndarray,
+               held: sp.spmatrix | None = None) -> list[np.ndarray]:
     """For each body, an orthonormal basis [n_body, k] (over that body's unfixed DOFs, in order) of
     the rigid modes the fixed DOFs leave free; bodies with none free are omitted.
 
-    points [n, d], axis [n]: every DOF; fixed [n] bool: prescribed; body [n] int: component label.
+    points [n, d], axis [n]: every DOF; fixed [n] bool: prescribed; body [n] int: component label;
+    held [n, n]: a positive semi-definite penalty on the DOFs (weak Dirichlet conditions), which
+    holds the modes it does not vanish on.
     Returns a list of (dof indices [n_body_free], basis [n_body_free, k]) flattened as arrays of
     shape [n_body_free, 1 + k] would be awkward, hence pairs.
     """
@@ -62,6 +66,8 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
         pins = np.nonzero(fixed[on])[0]
         pinned = rigid_modes(points[on][pins], axis[on][pins], center) / norms
         gram = pinned.T @ pinned
+        if held is not None:
+            gram = gram + _held_gram(held, points, axis, on, center, norms)
         w, v = np.linalg.eigh(gram)
         loose = v[:, w < PIN_TOLERANCE * max(1.0, float(w.max(initial=0.0)))]
         if loose.shape[1] == 0:
@@ -75,6 +81,23 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
         if q.shape[1]:
             out.append((free_dofs, q))
     return out
+
+
+def _held_gram(held: sp.spmatrix, points: np.ndarray, axis: np.ndarray, on, center: np.ndarray,
+               norms: np.ndarray) -> np.ndarray:
+    """R^T H R / max diag(H) for the unit rigid modes R of the body ``on`` on the DOFs the
+    penalty H [n, n] touches: a DOF held as firmly as the firmest counts like a pinned one."""
+    h = held.tocsr()
+    if isinstance(on, slice):
+        on = np.arange(len(points))
+    sub = h[on][:, on].tocoo()
+    rows = np.unique(np.concatenate([sub.row, sub.col]))
+    if not len(rows):
+        return 0.0
+    r = rigid_modes(points[on][rows], axis[on][rows], center) / norms
+    local = sp.csr_matrix((sub.data, (np.searchsorted(rows, sub.row), np.searchsorted(rows, sub.col))),
+                          shape=(len(rows), len(rows)))
+    return (r.T @ (local @ r)) / max(float(np.abs(h.diagonal()).max(initial=0.0)), np.finfo(float).tiny)
 
 
 def _mode_norms(points: np.ndarray, center: np.ndarray, axis: np.ndarray, d: int) -> np.ndarray:

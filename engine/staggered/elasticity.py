@@ -16,45 +16,22 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
+from ..boundary import Prescribed, SurfaceLoad, boundary_tractions, hold_warnings
 from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..material import Material, stress, von_mises
 from ..output import FieldData
-from ..regions import require_selection
 from ..solvers.cg import SolveStats, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
+from .nitsche import hold_quadrature, make_surface_operator
 from .multigrid import Multigrid
 from .operator import MIN_FRACTION, Level, device_array, dof_bodies, make_fine_level, pairs
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass
-class Prescribed:
-    """Displacement on the material inside ``region`` (anything with ``contains(points)``):
-    ``value`` [d] with None for free components, or a callable points [N, d] -> [N, d] [m]
-    (then ``components`` says which are prescribed)."""
-
-    region: object
-    value: tuple | PointFunction
-    name: str
-    components: tuple[bool, ...] | None = None
-
-
-@dataclass
-class SurfaceLoad:
-    """Traction on the mesh surface inside ``region``: exactly one of traction [d] or callable
-    [Pa], pressure [Pa] (positive pushes in), stress [d, d] or callable points -> [N, d, d] [Pa]."""
-
-    region: object
-    name: str
-    traction: object = None
-    pressure: float | None = None
-    stress: object = None
-    form: str = "quadrature"  # with a stress field: "quadrature" (sigma n on the surface) or "divergence"
 
 
 @dataclass
@@ -87,7 +64,16 @@ class StaggeredElasticity:
         grid = self.fractions.grid
         self.grid, self.dim = grid, grid.dim
         lam, mu = self.material.lame
-        self.level = level = make_fine_level(self.fractions, lam, mu)
+        # the surface where boundaries act, before the level: their samples must all be unknowns
+        self.hold = hold_quadrature(self.prescribed, self.surface, grid.spacing)
+        self._load_points = {
+            id(load): boundary_tractions(self.surface, load.region, grid.spacing, name=load.name,
+                                         traction=load.traction, pressure=load.pressure, stress=load.stress)
+            for load in self.surface_loads if load.form != "divergence"
+        }
+        acting = [pts for pts, _, _ in self._load_points.values()] + ([self.hold.points] if self.hold else [])
+        ghosts = sampling.stencil_samples(grid, np.concatenate(acting)) if acting else None
+        self.level = level = make_fine_level(self.fractions, lam, mu, ghosts=ghosts)
         lay = level.layout
         self.index = lay.indices()  # [positions, d] global index of every kept position
         n = len(self.index)
@@ -101,15 +87,14 @@ class StaggeredElasticity:
         points *= grid.spacing
         points += np.asarray(grid.origin, dtype=np.float64)
         self.dof_points = points
-        self.values = np.zeros((self.dim, level.size))  # prescribed displacement
-        fixed = np.zeros((self.dim, level.size), dtype=bool)
-        for bc in self.prescribed:
-            self._prescribe(bc, fixed)
-        level.set_free(level.active & ~fixed)
-        self.fixed = fixed & level.active
+        # displacement boundaries act on their surface patches, weakly (Nitsche): every active DOF is free
+        self.surface_terms = make_surface_operator(level, self.hold) if self.hold is not None else None
+        level.set_surface(self.surface_terms, self.hold)
+        self.warnings += hold_warnings(self.prescribed, self.surface)
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes()
         self.loads = self._load_vector()
+        self.hold_load = self._hold_load()
         if self.modes:
             check_balance(self.dof_points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
                           [(dofs, q) for dofs, q, _ in self.modes])
@@ -127,25 +112,6 @@ class StaggeredElasticity:
         self.space = _Space(level)
 
     # ------------------------------------------------------------------ setup
-    def _prescribe(self, bc: Prescribed, fixed: np.ndarray) -> None:
-        inside = np.asarray(bc.region.contains(self.dof_points), dtype=bool)
-        if callable(bc.value):
-            want = np.asarray(bc.components if bc.components is not None else (True,) * self.dim)
-            chosen = inside & want[self.dof_comp]
-            require_selection(int(chosen.sum()), "material", bc.name)
-            vals = np.asarray(bc.value(self.dof_points[chosen]), dtype=float).reshape(-1, self.dim)
-            vals = vals[np.arange(len(vals)), self.dof_comp[chosen]]
-        else:
-            want = np.array([v is not None for v in bc.value])
-            chosen = inside & want[self.dof_comp]
-            require_selection(int(chosen.sum()), "material", bc.name)
-            vals = np.array([0.0 if v is None else float(v) for v in bc.value])[self.dof_comp[chosen]]
-        if not np.all(np.isfinite(vals)):
-            raise BoundaryError(f"{bc.name}: the prescribed displacement is not finite")
-        a, p = self.dof_comp[chosen], self.dof_pos[chosen]
-        fixed[a, p] = True
-        self.values[a, p] = vals
-
     def _load_vector(self) -> np.ndarray:
         """Consistent nodal forces [d, size] [N] of body force and surface loads (not scaled)."""
         level, grid, d = self.level, self.grid, self.dim
@@ -167,8 +133,7 @@ class StaggeredElasticity:
             if load.form == "divergence":
                 f += self._divergence_load(load)
                 continue
-            pts, w, t = sampling.boundary_tractions(self.surface, load.region, grid.spacing, name=load.name,
-                                                    traction=load.traction, pressure=load.pressure, stress=load.stress)
+            pts, w, t = self._load_points[id(load)]
             spread = sampling.surface_loads(grid, pts, w, t, active, free=free, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
@@ -225,7 +190,7 @@ class StaggeredElasticity:
     def _free_body_lookup(self) -> Callable[[int, np.ndarray], np.ndarray] | None:
         """lookup(a, index [M, d]) -> int [M]: the body label of samples of bodies that no
         displacement boundary holds at all, 0 elsewhere; None when there is no such body."""
-        held = np.unique(self.dof_body[self.fixed[self.dof_comp, self.dof_pos]])
+        held = np.unique(self.dof_body[self._surface_dofs()]) if self.surface_terms is not None else np.zeros(0, int)
         loose = np.setdiff1d(np.unique(self.dof_body), np.append(held, 0))
         if len(loose) == 0:
             return None
@@ -244,12 +209,31 @@ class StaggeredElasticity:
         """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
         positions a * size + p of those DOFs)."""
         body = self.dof_body
-        fixed = self.fixed[self.dof_comp, self.dof_pos]
+        fixed = np.zeros(len(body), dtype=bool)
+        held = None
+        if self.surface_terms is not None:
+            at = self._surface_dofs()
+            m = self.surface_terms.mass.tocoo()
+            held = sp.csr_matrix((m.data, (at[m.row], at[m.col])), shape=(len(body),) * 2)
         out = []
-        for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body):
+        for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body, held=held):
             flat = self.dof_comp[dofs] * self.level.size + self.dof_pos[dofs]
             out.append((dofs, q, flat))
         return out
+
+    def _surface_dofs(self) -> np.ndarray:
+        """DOF numbers (into dof_comp / dof_pos) of the surface terms' DOFs, in their order."""
+        keys = self.dof_comp.astype(np.int64) * self.level.size + self.dof_pos
+        mine = self.surface_terms.comp.astype(np.int64) * self.level.size + self.surface_terms.pos
+        return np.searchsorted(keys, mine)  # the DOFs are numbered in (component, position) order
+
+    def _hold_load(self) -> np.ndarray:
+        """Load [d, size] [N] of the prescribed values at scale 1 (the Nitsche terms' right-hand side)."""
+        f = np.zeros((self.dim, self.level.size))
+        if self.surface_terms is not None:
+            st = self.surface_terms
+            np.add.at(f, (st.comp, st.pos), st.rhs)
+        return f
 
     # ------------------------------------------------------------------ solve
     def set_time_step(self, dt: float | None) -> None:
@@ -263,14 +247,12 @@ class StaggeredElasticity:
         predicted displacement u^k + dt v^k [d, size] of a backward-Euler step (after set_time_step)."""
         t0 = time.perf_counter()
         level = self.level
-        uD = device_array(value_scale * self.values * self.fixed)
-        KuD = level.zeros()
-        level.apply_unmasked(uD, KuD)
-        rhs = load_scale * self.loads - KuD.to_numpy()
+        rhs = load_scale * self.loads
+        if value_scale != 0.0 and self.surface_terms is not None:
+            rhs = rhs + value_scale * self.hold_load
         if inertia is not None:
-            rhs += level.shift * level.mass.to_numpy() * inertia
-            rhs -= level.shift * level.mass.to_numpy() * value_scale * self.values * self.fixed
-        rhs *= level.free
+            rhs = rhs + level.shift * level.mass.to_numpy() * inertia
+        rhs = rhs * level.free
         if self.modes:
             rhs = self._project(rhs)
         b = device_array(rhs)
@@ -293,7 +275,7 @@ class StaggeredElasticity:
         u = x.to_numpy().astype(np.float64)
         if self.modes:
             u = self._project(u)
-        u = u * level.free + value_scale * self.values * self.fixed
+        u = u * level.free
         return State(u, stats, time.perf_counter() - t0)
 
     def _jacobi(self, r, z) -> None:

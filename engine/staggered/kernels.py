@@ -143,7 +143,8 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
                       n: ti.i32, nbr: ti.types.ndarray(), mask: ti.types.ndarray(), sc: ti.types.ndarray(),
                       se: ti.types.ndarray(), scale: float, x: ti.types.ndarray(), m: ti.types.ndarray(),
                       shift: float, b: ti.types.ndarray(), dinv: ti.types.ndarray(), step: ti.types.ndarray(),
-                      c1: float, c2: float, y: ti.types.ndarray()):
+                      c1: float, c2: float, y: ti.types.ndarray(), has_extra: ti.template(),
+                      extra: ti.types.ndarray()):
     """A x = mask (h^{d-1} div(weighted stresses) + shift m x), the operator K (+ shift M), at the
     faces of the n positions of a part (whose stresses and their neighbours' must be current).
     ``mode``: APPLY y = A x; RESIDUAL y = b - A x; CHEBYSHEV step = c1 step + c2 dinv (b - A x),
@@ -151,7 +152,8 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
     y = c2 dinv A x (a power-iteration step; y may be x). Fusing these into the divergence saves
     writing and re-reading A x, and x is only read at the face itself (the stresses were computed
     before), so updating it in place is safe. Arrays a mode does not use may be any array of the
-    right rank."""
+    right rank. ``has_extra``: add ``extra`` [d, size] (the surface terms' S x, zero off their DOFs)
+    to A x."""
     for i in range(n):
         p = position(listed, pos, i)
         t = p >> (BITS * d)
@@ -168,6 +170,8 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
             f = div[a]
             if shift != 0.0:  # uniform branch: statics never read the mass and x here
                 f += shift * m[a, p] * x[a, p] / scale
+            if ti.static(has_extra):
+                f += extra[a, p] / scale
             if ti.static(mode == APPLY):
                 y[a, p] = stored(y, mask[a, p] * scale * f)
             elif ti.static(mode == RESIDUAL):
@@ -471,3 +475,29 @@ def count_nonfinite(d: ti.template(), x: ti.types.ndarray()) -> ti.i32:
             if ti.math.isnan(x[a, p]) or ti.math.isinf(x[a, p]):
                 bad += 1
     return bad
+
+
+@ti.kernel
+def gather(x: ti.types.ndarray(), comp: ti.types.ndarray(), pos: ti.types.ndarray(), z: ti.types.ndarray()):
+    """z[k] = x[comp[k], pos[k]]: the DOFs a surface operator touches, in its compact order."""
+    for k in range(comp.shape[0]):
+        z[k] = x[comp[k], pos[k]]
+
+
+@ti.kernel
+def csr_apply(indptr: ti.types.ndarray(), cols: ti.types.ndarray(), vals: ti.types.ndarray(),
+              src: ti.types.ndarray(), dst: ti.types.ndarray(), offset: ti.i32):
+    """dst[offset + i] = sum_k vals[k] src[cols[k]] over row i of a CSR matrix (a gather: no atomics;
+    src and dst may be one array when the rows written are not among the columns read)."""
+    for i in range(indptr.shape[0] - 1):
+        acc = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            acc += vals[k] * src[cols[k]]
+        dst[offset + i] = acc
+
+
+@ti.kernel
+def scatter(z: ti.types.ndarray(), comp: ti.types.ndarray(), pos: ti.types.ndarray(), y: ti.types.ndarray()):
+    """y[comp[k], pos[k]] = z[k] (the other entries of y are left as they are)."""
+    for k in range(comp.shape[0]):
+        y[comp[k], pos[k]] = stored(y, z[k])

@@ -23,6 +23,7 @@ from ..errors import ThinFeatureError
 from ..solvers.cg import SolverError
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
+from .nitsche import make_surface_operator
 from .operator import (Level, Mechanisms, describe_thin_features, device_array, dof_bodies, make_coarse_level, pairs,
                        unheld_groups)
 
@@ -71,6 +72,8 @@ class Multigrid:
             coarse = make_coarse_level(last)
             if cut_share(coarse) > MAX_CUT_SHARE:
                 break
+            if fine.hold is not None:  # the displacement boundaries, rediscretised on this level
+                coarse.set_surface(make_surface_operator(coarse, fine.hold), fine.hold)
             self.levels.append(coarse)
         # coarse tiles around each fine tile's parent (prolongation), fine tiles around each
         # coarse tile's children (restriction)
@@ -230,12 +233,17 @@ class CoarseSolver:
         A = K[order][:, order]
         if level.shift != 0.0 and level.mass is not None:
             A = A + sp.diags(level.shift * level.mass.to_numpy()[self.comp, self.pos])
+        held = None
+        if level.surface is not None:
+            S = _on_free(level.surface, level.surface.matrix(), self.comp, self.pos, level.size)
+            A = A + S
+            held = _on_free(level.surface, level.surface.mass, self.comp, self.pos, level.size)
         n = A.shape[0]
         self.n = n
         self.mechanisms = 0
         border = None
         if level.shift == 0.0:
-            border = self._floating_modes(level, comp, flat_pos, idx, free)
+            border = self._floating_modes(level, comp, flat_pos, idx, free, held)
             mech = unheld_groups(level)
             if mech.count:
                 self.mechanisms = mech.count
@@ -254,14 +262,21 @@ class CoarseSolver:
             ) from None
 
     @staticmethod
-    def _floating_modes(level: Level, comp, flat_pos, idx, free) -> np.ndarray:
+    def _floating_modes(level: Level, comp, flat_pos, idx, free, held) -> np.ndarray:
         lay = level.layout
         d = lay.dim
         active = level.active[comp, flat_pos]
         points = (np.tile(idx, (d, 1)) + 0.5 - 0.5 * np.eye(d, dtype=int)[comp]) * level.spacing
         body = dof_bodies(level, comp, flat_pos)
         on = active & (body > 0)
-        modes = free_modes(points[on], comp[on], ~free[on], body[on])
+        if held is not None:  # the penalty over the free DOFs -> over the DOFs "on"
+            number = -np.ones(len(comp), dtype=np.int64)
+            number[on] = np.arange(int(on.sum()))
+            number = number[np.nonzero(free)[0]]
+            m = held.tocoo()
+            keep = (number[m.row] >= 0) & (number[m.col] >= 0)
+            held = sp.csr_matrix((m.data[keep], (number[m.row[keep]], number[m.col[keep]])), shape=(int(on.sum()),) * 2)
+        modes = free_modes(points[on], comp[on], ~free[on], body[on], held=held)
         free_index = -np.ones(len(comp), dtype=np.int64)
         free_index[free] = np.arange(int(free.sum()))
         on_index = np.nonzero(on)[0]
@@ -299,3 +314,17 @@ def _with_mechanisms(border: np.ndarray, mech: Mechanisms, comp: np.ndarray, pos
     # an orthonormal basis of what the motions leave of the (orthonormal) rigid columns
     u, s, _ = np.linalg.svd(rest, full_matrices=False)
     return np.concatenate([motions, u[:, s > 1e-8]], axis=1)
+
+
+def _on_free(surface, matrix: sp.spmatrix, comp: np.ndarray, pos: np.ndarray, size: int) -> sp.csr_matrix:
+    """A surface-operator ``matrix`` [n, n] (over ``surface``'s DOFs) on the free DOFs (comp [N],
+    pos [N]) of a level [N, N] (entries at DOFs that are not free dropped)."""
+    keys = comp.astype(np.int64) * size + pos
+    order = np.argsort(keys)
+    mine = surface.comp.astype(np.int64) * size + surface.pos
+    k = np.minimum(np.searchsorted(keys[order], mine), len(keys) - 1)
+    found = keys[order][k] == mine
+    at = order[k]
+    m = matrix.tocoo()
+    keep = found[m.row] & found[m.col]
+    return sp.csr_matrix((m.data[keep], (at[m.row[keep]], at[m.col[keep]])), shape=(len(keys), len(keys)))

@@ -9,6 +9,7 @@ runs never build a mass). The finest level comes from exact volume fractions
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,6 +110,8 @@ class Level:
         self.slivers = 0  # control volumes whose weight was raised to MIN_FRACTION
         self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
+        self.surface = None  # the Nitsche terms of displacement boundaries (nitsche.SurfaceOperator)
+        self.hold = None  # their quadrature (nitsche.HoldQuadrature), for the coarser levels
         self.set_free(self.active)
 
     @property
@@ -132,6 +135,34 @@ class Level:
             self.mass = device_array(density * self.spacing**self.dim * self.vf_host, self.dtype)
         self._dinv = None
 
+    def set_surface(self, surface, hold) -> None:
+        """Add the surface terms ``surface`` (a ``nitsche.SurfaceOperator`` of this level, from the
+        quadrature ``hold``) to A: S x = mass xs - [flux, stress^T] [stress xs; flux^T xs] on its
+        DOFs xs, two CSR passes over z = [xs; stress xs; flux^T xs]."""
+        self.surface, self.hold = surface, hold
+        self._dinv = None
+        if surface is None:
+            return
+        n = len(surface.comp)
+        lower = sp.vstack([surface.stress, surface.flux.T]).tocsr()
+        upper = sp.hstack([surface.mass, -surface.flux, -surface.stress.T]).tocsr()
+        self._ids = (device_array(surface.comp.astype(np.int32)), device_array(surface.pos.astype(np.int32)))
+        self._csr = [(device_array(m.indptr.astype(np.int32)), device_array(m.indices.astype(np.int32)),
+                      device_array(m.data, np.float64)) for m in (lower, upper)]
+        self._z = ti.ndarray(dtype=ti.f64, shape=(n + lower.shape[0],))
+        self._sx = ti.ndarray(dtype=ti.f64, shape=(n,))
+        self.extra = self.zeros()
+        self._surface_count = n
+
+    def _surface_apply(self, x) -> None:
+        """extra = S x at the surface DOFs (the rest of ``extra`` stays zero)."""
+        comp, pos = self._ids
+        (lp, lc, lv), (up, uc, uv) = self._csr
+        kernels.gather(x, comp, pos, self._z)
+        kernels.csr_apply(lp, lc, lv, self._z, self._z, self._surface_count)
+        kernels.csr_apply(up, uc, uv, self._z, self._sx, 0)
+        kernels.scatter(self._sx, comp, pos, self.extra)
+
     def _mass_or_mask(self):
         return self.mass if self.mass is not None else self.mask
 
@@ -144,6 +175,14 @@ class Level:
             d = self.dim
             kernels.inverse_diagonal(d, self.coords, self.tmap, self.mask, self.vc, self.ve, self.lam, self.mu,
                                      self.spacing ** (d - 2), self._mass_or_mask(), self.shift, self._dinv)
+            if self.surface is not None:
+                sf = self.surface
+                dinv = self._dinv.to_numpy()
+                old = dinv[sf.comp, sf.pos].astype(np.float64)
+                on = old > 0
+                diag = 1.0 / np.where(on, old, 1.0) + sf.diagonal
+                dinv[sf.comp, sf.pos] = np.where(on & (diag > 0), 1.0 / np.where(diag > 0, diag, 1.0), 0.0)
+                self._dinv.from_numpy(dinv)
         return self._dinv
 
     def part(self, update: np.ndarray) -> Part:
@@ -168,10 +207,14 @@ class Level:
     def _divergence(self, mode: int, part: Part | None, x, b, dinv, step, c1: float, c2: float, y) -> None:
         d = self.dim
         listed = part is not None
+        surface = self.surface is not None
+        if surface:
+            self._surface_apply(x)
         kernels.stress_divergence(d, mode, listed, part.update if listed else self._unlisted,
                                   part.m if listed else self.layout.count * self.layout.tile_size,
                                   self.nbr, self.mask, self.sc, self.se, self.spacing ** (d - 1), x,
-                                  self._mass_or_mask(), self.shift, b, dinv, step, c1, c2, y)
+                                  self._mass_or_mask(), self.shift, b, dinv, step, c1, c2, y, surface,
+                                  self.extra if surface else self.mask)
 
     def apply(self, x, y, part: Part | None = None) -> None:
         """y = A x on the free DOFs (x must vanish off them); only at ``part``'s positions when given."""
@@ -193,15 +236,6 @@ class Level:
         """y = c D^-1 A x (y may be x)."""
         self._stresses(x, None)
         self._divergence(kernels.PRECONDITIONED, None, x, y, self.dinv, y, 0.0, c, y)
-
-    def apply_unmasked(self, x, y) -> None:
-        """y = K x at every active DOF (for loads from prescribed values and reactions)."""
-        saved = self.mask
-        self.mask = device_array(self.active, self.dtype)
-        try:
-            self.apply(x, y)
-        finally:
-            self.mask = saved
 
 
 # A run touching more kept shear edges than this is taken as held by its neighbours (see
@@ -409,6 +443,14 @@ def dof_bodies(level: Level, comp: np.ndarray, pos: np.ndarray) -> np.ndarray:
     for a in range(d):
         on = (comp == a) & (body == 0)
         body[on] = cell[lay.shifted(pos[on], a, -1)]
+    # a ghost sample (beside no material, tied by an edge) belongs to the body of a cell around it
+    loose = np.nonzero(body == 0)[0]
+    if len(loose):
+        index = lay.indices()[pos[loose]]
+        for o in itertools.product((-1, 0, 1), repeat=d):
+            p = lay.positions(index + np.asarray(o))
+            found = np.where(p >= 0, cell[np.maximum(p, 0)], 0)
+            body[loose] = np.where(body[loose] == 0, found, body[loose])
     return body
 
 
@@ -429,9 +471,14 @@ def weights(fractions: np.ndarray) -> np.ndarray:
     return np.where((v > 0) & (v < MIN_FRACTION), MIN_FRACTION, v)
 
 
-def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: type | None = None) -> Level:
+def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: type | None = None,
+                    ghosts: list[np.ndarray] | None = None) -> Level:
     """The finest level: the kept tiles are those touching material, with exact fractions.
-    ``dtype``: its device float type (default the solve precision)."""
+    ``dtype``: its device float type (default the solve precision). ``ghosts``: per component a
+    [k, d] samples outside the material that surface points interpolate from
+    (``sampling.stencil_samples``); those an edge holding material ties to the body join the
+    unknowns (:func:`_ghost_faces`), so boundary conditions and loads read a linear
+    interpolation there, not the nearest inner sample."""
     grid = fractions.grid
     d = grid.dim
     box = tuple(n + 1 for n in grid.shape)
@@ -446,10 +493,47 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     vf[vf > 1.0 - ROUNDOFF] = 1.0
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
     vc, ve = _snap(vc), _snap(ve)
-    level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype)
+    active = _ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else None
+    level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype, active)
     level.slivers = slivers
     level.origin = tuple(float(o) for o in grid.origin)
     return level
+
+
+def _ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: list[np.ndarray]) -> np.ndarray:
+    """Active faces [d, size] bool: those beside material, and the ``candidates`` (per component a
+    [k, d] sample indices) that share an edge holding material (ve > 0) with three active samples.
+    Such a ghost sample lies outside the material but its edge's shear energy ties it to the
+    body, so it is determined by the discrete energy as it stands (its edge was only pruned for
+    want of the sample); a sample no edge ties stays out."""
+    d = layout.dim
+    found = np.zeros((d, layout.size), dtype=np.int32)
+    kernels.active_faces(d, layout.coords, layout.tile_map, np.ascontiguousarray(vc, dtype=np.float64), found)
+    active = found.astype(bool)
+    eye = np.eye(d, dtype=np.int64)
+
+    def on(a: int, index: np.ndarray) -> np.ndarray:
+        p = layout.positions(index)
+        return (p >= 0) & active[a, np.maximum(p, 0)]
+
+    extra = []
+    for a, cand in enumerate(candidates):
+        p = layout.positions(cand)
+        cand = cand[(p >= 0) & ~active[a, np.maximum(p, 0)]]
+        tied = np.zeros(len(cand), dtype=bool)
+        for q, pair in enumerate(pairs(d)):
+            if a not in pair:
+                continue
+            b = pair[1] if pair[0] == a else pair[0]
+            # edge (a, b) at E reads u_a(E), u_a(E - e_b), u_b(E), u_b(E - e_a): u_a(I) is read at E = I, I + e_b
+            for edge, other in ((cand, cand - eye[b]), (cand + eye[b], cand + eye[b])):
+                pe = layout.positions(edge)
+                held = (pe >= 0) & (ve[q, np.maximum(pe, 0)] > 0) & on(a, other) & on(b, edge) & on(b, edge - eye[a])
+                tied |= held
+        extra.append((a, layout.positions(cand[tied])))
+    for a, p in extra:
+        active[a, p] = True
+    return active
 
 
 def make_coarse_level(fine: Level) -> Level:
@@ -470,12 +554,15 @@ def make_coarse_level(fine: Level) -> Level:
     return coarse
 
 
-def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float, dtype: type | None) -> Level:
-    """Drop the tiles holding no active DOF and no material, then build the level."""
+def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float, dtype: type | None,
+            active: np.ndarray | None = None) -> Level:
+    """Drop the tiles holding no active DOF and no material, then build the level (``active``
+    [d, size]: the active faces when not just those beside material)."""
     d, ts = layout.dim, layout.tile_size
-    found = np.zeros((d, layout.size), dtype=np.int32)
-    kernels.active_faces(d, layout.coords, layout.tile_map, np.ascontiguousarray(vc, dtype=np.float64), found)
-    active = found.astype(bool)
+    if active is None:
+        found = np.zeros((d, layout.size), dtype=np.int32)
+        kernels.active_faces(d, layout.coords, layout.tile_map, np.ascontiguousarray(vc, dtype=np.float64), found)
+        active = found.astype(bool)
     keep = active.reshape(d, -1, ts)[:, : layout.count].any(axis=(0, 2))
     keep |= (vc.reshape(-1, ts)[: layout.count] > 0).any(axis=1)
     if not keep.all():

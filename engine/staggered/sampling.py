@@ -14,9 +14,8 @@ whose loads must balance -- the body's load gets the self-equilibrated couple th
 first moments (``_moment_couple``): the discrete load then has the quadrature's net force *and*
 net moment, and a load that balances on the surface balances on the samples.
 
-Surface integrals use a degree-5 Gauss rule on pieces no longer than h/2 (``surface_quadrature``);
-``boundary_tractions`` turns a traction / pressure / stress boundary condition on a region of the
-surface into quadrature points, weights and traction vectors.
+Surface quadrature and the tractions of boundary conditions are the method-neutral
+``engine.boundary``'s.
 
 Units: positions [m], tractions, pressures and stresses [Pa], weights [m^2] (3D) or [m] (2D), forces
 [N] (2D: per unit thickness, [N/m]); lattice offsets in units of h.
@@ -25,15 +24,12 @@ Units: positions [m], tractions, pressures and stresses [Pa], weights [m^2] (3D)
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Callable
 
 import numpy as np
 
 from ..errors import VoxelasticError
-from ..geometry.surface import Surface
 from ..grid import Grid
-from ..regions import Region, _subdivide, require_selection
 
 # lookup(a, index [M, d] int64) -> (values [M], active [M] bool); index always inside the index box.
 Lookup = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -98,6 +94,19 @@ def _corner_weights(frac: np.ndarray) -> np.ndarray:
     return phi.reshape(n, 2**d)
 
 
+def stencil_samples(grid: Grid, points: np.ndarray) -> list[np.ndarray]:
+    """Per component a, the distinct samples [k, d] in the multilinear stencils of ``points``
+    [N, d] [m]: where samples must be active for the interpolation at those points to be the full
+    multilinear one."""
+    d = grid.dim
+    out = []
+    for a in range(d):
+        base, _ = _lattice(grid, points, a)
+        cells, _ = _unique_rows(base)
+        out.append(_unique_rows((cells[:, None, :] + _corners(d)[None]).reshape(-1, d))[0])
+    return out
+
+
 def interpolate(grid: Grid, points: np.ndarray, lookup: Lookup) -> np.ndarray:
     """Displacement [N, d] [m] at ``points`` [N, d] from the staggered values, restricted to material.
 
@@ -116,33 +125,6 @@ def interpolate(grid: Grid, points: np.ndarray, lookup: Lookup) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
             out[:, a] = (weights * np.where(active, values, 0.0)).sum(axis=1) / total
     return out
-
-
-def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
-    as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
-
-    Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided by edge midpoints until none
-    is, so each piece crosses few cells of the piecewise-multilinear interpolant; on each piece a
-    degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates. Zero-area
-    pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
-    area / length to round-off) and unit outward normals [Q, d].
-    """
-    facets = np.asarray(facets, dtype=float)
-    if facets.ndim != 3 or facets.shape[1] != facets.shape[2] or facets.shape[2] not in (2, 3):
-        raise ValueError(f"facets: expected shape [M, d, d] with d = 2 or 3, got {facets.shape}")
-    if not (math.isfinite(spacing) and spacing > 0):
-        raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
-    d = facets.shape[2]
-    facets = _refine(facets, 0.5 * spacing)
-    measure, normals = _measure_and_normal(facets)
-    keep = measure > 0
-    facets, measure, normals = facets[keep], measure[keep], normals[keep]
-    bary, rule = _gauss_rule(d)
-    points = np.einsum("qk,fkj->fqj", bary, facets).reshape(-1, d)
-    weights = (measure[:, None] * rule[None, :]).ravel()
-    normals = np.repeat(normals, len(rule), axis=0)
-    return points, weights, normals
 
 
 def surface_loads(
@@ -317,59 +299,6 @@ def _unique_rows(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (np.stack(np.unravel_index(keys, dims), axis=1) + lo).astype(np.int64), inverse.ravel()
 
 
-def boundary_tractions(
-    surface: Surface,
-    region: Region,
-    spacing: float,
-    *,
-    name: str,
-    traction: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
-    pressure: float | None = None,
-    stress: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quadrature of a surface load on the part of ``surface`` inside ``region``.
-
-    Exactly one of: ``traction`` a constant vector [d] [Pa] or a callable points [Q, d] -> [Q, d];
-    ``pressure`` p [Pa], traction -p n (positive pressure pushes into the surface); ``stress`` a
-    constant Cauchy stress [d, d] [Pa] or a callable points [Q, d] -> [Q, d, d], traction sigma n
-    (manufactured solutions). ``spacing`` is the grid's h [m] (sets the subdivision). ``name``
-    names the boundary condition in errors; a region that selects no surface of positive area is
-    one. Returns points [Q, d] [m], weights [Q] [m^2 | m] and tractions [Q, d] [Pa].
-    """
-    given = [k for k, v in (("traction", traction), ("pressure", pressure), ("stress", stress)) if v is not None]
-    if len(given) != 1:
-        raise ValueError(f"{name}: give exactly one of traction, pressure or stress, got {given or 'none'}")
-    d = surface.dim
-    pieces, _ = region.clip(surface.vertices[surface.faces])
-    points, weights, normals = surface_quadrature(pieces.reshape(-1, d, d), spacing)
-    require_selection(len(weights), "surface", name)
-    return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
-
-
-def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=None, pressure: float | None = None,
-              stress=None) -> np.ndarray:
-    """Traction [Q, d] [Pa] at surface points [Q, d] with unit outward normals [Q, d]: -p n for a
-    pressure, sigma n for a stress (constant [d, d] or callable), else the traction (constant [d] or
-    callable). ValueError naming ``name`` for a wrong shape or a non-finite value."""
-    q, d = points.shape
-    if pressure is not None:
-        t = -float(pressure) * normals
-    elif stress is not None:
-        sigma = np.asarray(stress(points) if callable(stress) else stress, dtype=float)
-        sigma = np.broadcast_to(sigma, (q, d, d)) if sigma.shape == (d, d) else sigma
-        if sigma.shape != (q, d, d):
-            raise ValueError(f"{name}.stress: expected [{d}, {d}] or [{q}, {d}, {d}], got {sigma.shape}")
-        t = np.einsum("qij,qj->qi", sigma, normals)
-    else:
-        t = np.asarray(traction(points) if callable(traction) else traction, dtype=float)
-        t = np.broadcast_to(t, (q, d)) if t.shape == (d,) else t
-        if t.shape != (q, d):
-            raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
-    if not np.all(np.isfinite(t)):
-        raise ValueError(f"{name}: the traction is not finite at some surface points")
-    return np.array(t)
-
-
 def _read(grid: Grid, index: np.ndarray, a: int, lookup: Lookup) -> tuple[np.ndarray, np.ndarray]:
     """Values and activity [N, k] of stencil samples ``index`` [N, k, d]; outside the box: inactive."""
     flat = index.reshape(-1, grid.dim)
@@ -381,49 +310,3 @@ def _read(grid: Grid, index: np.ndarray, a: int, lookup: Lookup) -> tuple[np.nda
         values[inside] = v
         active[inside] = act
     return values.reshape(index.shape[:2]), active.reshape(index.shape[:2])
-
-
-def _refine(facets: np.ndarray, longest: float) -> np.ndarray:
-    """Midpoint-subdivide facets [M, d, d] until every edge is at most ``longest`` [m]."""
-    done = []
-    while len(facets):
-        edges = facets - np.roll(facets, 1, axis=1)  # every edge of a triangle; the segment twice
-        long = np.linalg.norm(edges, axis=2).max(axis=1) > longest
-        done.append(facets[~long])
-        facets = _subdivide(facets[long])
-    return np.concatenate(done) if done else facets
-
-
-def _measure_and_normal(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Area / length [M] and unit outward normal [M, d] of simplices [M, d, d] (zero normal if degenerate).
-
-    The area vector is the generalised cross product of the d - 1 edge vectors: component k is the
-    determinant of the edges stacked over e_k, signed (-1)^(d+1) so that it points out in both
-    conventions (3D right-hand rule, 2D solid on the left); its length is (d - 1)! times the measure.
-    """
-    m, d = facets.shape[0], facets.shape[2]
-    edges = facets[:, 1:] - facets[:, :1]  # [M, d-1, d]
-    rows = np.broadcast_to(np.eye(d)[None, :, None, :], (m, d, 1, d))
-    stacked = np.concatenate([np.broadcast_to(edges[:, None], (m, d, d - 1, d)), rows], axis=2)
-    area_vector = (-1) ** (d + 1) * np.linalg.det(stacked)  # [M, d]
-    norm = np.linalg.norm(area_vector, axis=1)
-    normals = area_vector / np.where(norm > 0, norm, 1.0)[:, None]
-    return norm / math.factorial(d - 1), normals
-
-
-def _gauss_rule(d: int) -> tuple[np.ndarray, np.ndarray]:
-    """Degree-5 rule on the reference simplex of a (d-1)-dimensional facet: barycentric points [q, d]
-    and weights [q] summing to 1 (fractions of the facet's measure)."""
-    if d == 2:
-        x, w = np.polynomial.legendre.leggauss(3)
-        t = 0.5 * (1.0 + x)
-        return np.stack([1.0 - t, t], axis=1), 0.5 * w
-    r = math.sqrt(15.0)
-    points, weights = [np.full(3, 1.0 / 3.0)], [9.0 / 40.0]
-    for c, w in (((6.0 - r) / 21.0, (155.0 - r) / 1200.0), ((6.0 + r) / 21.0, (155.0 + r) / 1200.0)):
-        for k in range(3):
-            p = np.full(3, c)
-            p[k] = 1.0 - 2.0 * c
-            points.append(p)
-            weights.append(w)
-    return np.array(points), np.array(weights)

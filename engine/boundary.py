@@ -1,0 +1,341 @@
+"""Boundary conditions as both methods see them: what acts, on which surface patch, with which value.
+
+Every boundary acts on its *surface patch*: the part of the mesh surface inside its region,
+optionally only the facets facing a given way (DESIGN.md "Job spec"). A displacement boundary
+holds the solid's surface there, per component (``Prescribed``); traction and pressure act there
+(``SurfaceLoad``). This module turns a job spec (plus the Python API's callables) into those
+objects (:func:`make_boundaries`), clips patches with errors that say what is wrong
+(:func:`select_patch`), integrates over them (:func:`surface_quadrature`) and evaluates tractions
+(:func:`tractions`). How a method turns a boundary into its own unknowns stays in the method.
+
+Units: positions [m], tractions, pressures and stresses [Pa], displacements [m], weights [m^2]
+(3D) or [m] (2D).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import BoundaryError
+from .geometry.surface import Surface
+from .regions import Region, _subdivide, make_region
+
+PointFunction = Callable[[np.ndarray], np.ndarray]
+
+# A displacement patch covering more than this share of a body's surface gets a warning: usually a
+# half-space whose normal points the wrong way (the normal points out of the region).
+WIDE_HOLD = 0.5
+
+
+@dataclass
+class Prescribed:
+    """Displacement of the surface patch of ``region``: ``value`` [d] with None for free
+    components, or a callable points [N, d] -> [N, d] [m] (then ``components`` says which are
+    prescribed; default all)."""
+
+    region: object
+    value: tuple | PointFunction
+    name: str
+    components: tuple[bool, ...] | None = None
+
+    def mask(self, d: int) -> np.ndarray:
+        """The prescribed components [d] bool."""
+        if callable(self.value):
+            return np.asarray(self.components if self.components is not None else (True,) * d, dtype=bool)
+        return np.array([v is not None for v in self.value], dtype=bool)
+
+    def values(self, points: np.ndarray) -> np.ndarray:
+        """Prescribed displacement [N, d] [m] at points [N, d] (0 in free components); BoundaryError
+        naming the boundary when it is not finite."""
+        n, d = points.shape
+        if callable(self.value):
+            g = np.asarray(self.value(points), dtype=float).reshape(n, d)
+        else:
+            g = np.broadcast_to(np.array([0.0 if v is None else float(v) for v in self.value]), (n, d))
+        if not np.all(np.isfinite(g)):
+            raise BoundaryError(f"{self.name}: the prescribed displacement is not finite at some surface points")
+        return np.where(self.mask(d)[None, :], g, 0.0)
+
+
+@dataclass
+class SurfaceLoad:
+    """Traction on the surface patch of ``region``: exactly one of traction [d] or callable [Pa],
+    pressure [Pa] (positive pushes in), stress [d, d] or callable points -> [N, d, d] [Pa]. ``form``
+    is how the staggered method applies a stress field or pressure: "quadrature" (sigma n on the
+    surface) or "divergence" (thesis eq. 4.16); DG always integrates on the surface."""
+
+    region: object
+    name: str
+    traction: object = None
+    pressure: float | None = None
+    stress: object = None
+    form: str = "quadrature"
+
+    def tractions(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Traction [Q, d] [Pa] at surface points [Q, d] with unit outward normals [Q, d]."""
+        return tractions(points, normals, name=self.name, traction=self.traction, pressure=self.pressure,
+                         stress=self.stress)
+
+
+@dataclass
+class Boundaries:
+    """What a job's boundaries and loads are, independent of the method."""
+
+    prescribed: list[Prescribed] = field(default_factory=list)
+    loads: list[SurfaceLoad] = field(default_factory=list)
+    body_force: np.ndarray | PointFunction | None = None  # [d] or callable [N/m^3]
+
+
+class PredicateRegion:
+    """A region given by a callable mask points [N, d] -> bool [N] (Python API). Surface facets
+    count by their centroid, so patches are resolved to the facet size."""
+
+    def __init__(self, mask: PointFunction) -> None:
+        self.mask = mask
+
+    def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
+        return np.asarray(self.mask(np.asarray(points, dtype=float)), dtype=bool).reshape(len(points))
+
+    def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        keep = np.nonzero(self.contains(np.asarray(facets).mean(axis=1)))[0]
+        return np.asarray(facets)[keep], keep
+
+
+@dataclass(frozen=True)
+class Facing:
+    """``region`` restricted, on surfaces, to the facets whose outward normal is within
+    ``max_angle_deg`` of ``direction`` [d] (membership of points is the region's own)."""
+
+    region: object
+    direction: np.ndarray
+    max_angle_deg: float
+
+    def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
+        return self.region.contains(points, slack)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        return region_distance(self.region, points)
+
+    def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        facets = np.asarray(facets, dtype=float)
+        _, normals = _measure_and_normal(facets)
+        direction = np.asarray(self.direction, dtype=float)
+        # the same small slack as plane clipping: a facet at exactly the angle is kept
+        faces = normals @ (direction / np.linalg.norm(direction)) >= math.cos(math.radians(self.max_angle_deg)) - 1e-12
+        pieces, source = self.region.clip(facets[faces], tolerance)
+        return pieces, np.nonzero(faces)[0][source]
+
+
+def make_boundaries(spec, functions, material) -> Boundaries:
+    """The boundaries of a validated job spec, with the Python API's ``functions`` (an
+    ``engine.pipeline.Functions``) replacing values and regions by name; ``material`` gives the
+    density for gravity."""
+    d = spec.dimension
+    out = Boundaries()
+    for i, b in enumerate(spec.boundaries):
+        name = b.name or f"boundaries.{i}"
+        region = PredicateRegion(functions.regions[name]) if name in functions.regions else make_region(b.region, d)
+        if getattr(b, "facing", None) is not None:
+            region = Facing(region, np.asarray(b.facing.direction, dtype=float), float(b.facing.max_angle_deg))
+        if b.kind == "displacement":
+            value = functions.displacement.get(name, b.value)
+            out.prescribed.append(Prescribed(region, value, name, tuple(v is not None for v in b.value)))
+        elif b.kind == "traction":
+            if name in functions.stress:
+                out.loads.append(SurfaceLoad(region, name, stress=functions.stress[name], form=functions.stress_form))
+            else:
+                value = functions.traction.get(name, np.asarray(b.value, dtype=float))
+                out.loads.append(SurfaceLoad(region, name, traction=value))
+        else:
+            out.loads.append(SurfaceLoad(region, name, pressure=float(b.value), form=functions.pressure_form))
+    out.body_force = functions.body_force
+    if out.body_force is None and spec.loads.gravity is not None and any(g != 0 for g in spec.loads.gravity):
+        out.body_force = material.density * np.asarray(spec.loads.gravity, dtype=float)
+    return out
+
+
+def select_patch(region, facets: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces of ``facets`` [N, d, d] inside ``region`` (pieces [M, d, d], source facet [M]).
+    A region that selects no surface of positive measure is a BoundaryError naming the boundary
+    and how far the region is from the surface."""
+    facets = np.asarray(facets, dtype=float)
+    pieces, source = region.clip(facets)
+    if len(pieces) and _measure_and_normal(pieces)[0].sum() > 0:
+        return pieces, source
+    where = ""
+    gap = region_distance(region, facets.reshape(-1, facets.shape[-1]))
+    if gap is not None and len(gap):
+        where = f" (its region is {gap.min():.4g} m from the nearest surface vertex)"
+    facing = " that faces the given direction" if isinstance(region, Facing) else ""
+    raise BoundaryError(
+        f"{name}: the region holds no part of the mesh surface{facing}{where}; every boundary acts on the surface "
+        "inside its region: move or widen the region so that it takes in the surface it should act on"
+    )
+
+
+def region_distance(region, points: np.ndarray) -> np.ndarray | None:
+    """Distance [N] [m] from points [N, d] to ``region`` (0 inside; a lower bound for an
+    intersection of half-spaces that is not a box), or None when the region cannot say."""
+    if isinstance(region, Facing):
+        return region_distance(region.region, points)
+    from .regions import Ball, Halfspaces
+
+    points = np.asarray(points, dtype=float)
+    if isinstance(region, Ball):
+        return np.maximum(np.linalg.norm(points - region.center, axis=1) - region.radius, 0.0)
+    if isinstance(region, Halfspaces):
+        if len(region.offsets) == 0:
+            return np.zeros(len(points))
+        over = np.maximum(points @ region.normals.T - region.offsets, 0.0)  # [N, planes]
+        d = points.shape[1]
+        axis_box = len(region.offsets) == 2 * d and np.allclose(np.abs(region.normals), np.vstack([np.eye(d)] * 2))
+        return np.linalg.norm(over, axis=1) if axis_box else over.max(axis=1)
+    return None
+
+
+def hold_warnings(prescribed: list[Prescribed], surface: Surface) -> list[str]:
+    """A warning for each displacement boundary whose patch covers more than WIDE_HOLD of the
+    surface (usually a half-space whose normal points the wrong way)."""
+    facets = surface.vertices[surface.faces]
+    total = _measure_and_normal(facets)[0].sum()
+    out = []
+    for bc in prescribed:
+        pieces, _ = bc.region.clip(facets)
+        share = _measure_and_normal(pieces)[0].sum() / total if total > 0 and len(pieces) else 0.0
+        if share > WIDE_HOLD:
+            out.append(
+                f"{bc.name}: the displacement boundary holds {share:.0%} of the surface; if it should hold less, check "
+                "the region (a half-space holds the side its normal points away from: the normal points out of it)"
+            )
+    return out
+
+
+def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
+    as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
+
+    Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided by edge midpoints until none
+    is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
+    degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates. Zero-area
+    pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
+    area / length to round-off) and unit outward normals [Q, d].
+    """
+    facets = np.asarray(facets, dtype=float)
+    if facets.ndim != 3 or facets.shape[1] != facets.shape[2] or facets.shape[2] not in (2, 3):
+        raise ValueError(f"facets: expected shape [M, d, d] with d = 2 or 3, got {facets.shape}")
+    if not (math.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
+    d = facets.shape[2]
+    facets = _refine(facets, 0.5 * spacing)
+    measure, normals = _measure_and_normal(facets)
+    keep = measure > 0
+    facets, measure, normals = facets[keep], measure[keep], normals[keep]
+    bary, rule = _gauss_rule(d)
+    points = np.einsum("qk,fkj->fqj", bary, facets).reshape(-1, d)
+    weights = (measure[:, None] * rule[None, :]).ravel()
+    normals = np.repeat(normals, len(rule), axis=0)
+    return points, weights, normals
+
+
+def boundary_tractions(
+    surface: Surface,
+    region: Region,
+    spacing: float,
+    *,
+    name: str,
+    traction: np.ndarray | PointFunction | None = None,
+    pressure: float | None = None,
+    stress: np.ndarray | PointFunction | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadrature of a surface load on the surface patch of ``region``.
+
+    Exactly one of: ``traction`` a constant vector [d] [Pa] or a callable points [Q, d] -> [Q, d];
+    ``pressure`` p [Pa], traction -p n (positive pressure pushes into the surface); ``stress`` a
+    constant Cauchy stress [d, d] [Pa] or a callable points [Q, d] -> [Q, d, d], traction sigma n
+    (manufactured solutions). ``spacing`` is the grid's h [m] (sets the subdivision). ``name``
+    names the boundary condition in errors; a region that selects no surface of positive area is
+    one (:func:`select_patch`). Returns points [Q, d] [m], weights [Q] [m^2 | m] and tractions [Q, d] [Pa].
+    """
+    given = [k for k, v in (("traction", traction), ("pressure", pressure), ("stress", stress)) if v is not None]
+    if len(given) != 1:
+        raise ValueError(f"{name}: give exactly one of traction, pressure or stress, got {given or 'none'}")
+    d = surface.dim
+    pieces, _ = select_patch(region, surface.vertices[surface.faces], name)
+    points, weights, normals = surface_quadrature(pieces.reshape(-1, d, d), spacing)
+    return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
+
+
+def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=None, pressure: float | None = None,
+              stress=None) -> np.ndarray:
+    """Traction [Q, d] [Pa] at surface points [Q, d] with unit outward normals [Q, d]: -p n for a
+    pressure, sigma n for a stress (constant [d, d] or callable), else the traction (constant [d] or
+    callable). ValueError naming ``name`` for a wrong shape or a non-finite value."""
+    q, d = points.shape
+    if pressure is not None:
+        t = -float(pressure) * normals
+    elif stress is not None:
+        sigma = np.asarray(stress(points) if callable(stress) else stress, dtype=float)
+        sigma = np.broadcast_to(sigma, (q, d, d)) if sigma.shape == (d, d) else sigma
+        if sigma.shape != (q, d, d):
+            raise ValueError(f"{name}.stress: expected [{d}, {d}] or [{q}, {d}, {d}], got {sigma.shape}")
+        t = np.einsum("qij,qj->qi", sigma, normals)
+    else:
+        t = np.asarray(traction(points) if callable(traction) else traction, dtype=float)
+        t = np.broadcast_to(t, (q, d)) if t.shape == (d,) else t
+        if t.shape != (q, d):
+            raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}: the traction is not finite at some surface points")
+    return np.array(t)
+
+
+def _refine(facets: np.ndarray, longest: float) -> np.ndarray:
+    """Midpoint-subdivide facets [M, d, d] until every edge is at most ``longest`` [m]."""
+    done = []
+    while len(facets):
+        edges = facets - np.roll(facets, 1, axis=1)  # every edge of a triangle; the segment twice
+        long = np.linalg.norm(edges, axis=2).max(axis=1) > longest
+        done.append(facets[~long])
+        facets = _subdivide(facets[long])
+    return np.concatenate(done) if done else facets
+
+
+def _measure_and_normal(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Area / length [M] and unit outward normal [M, d] of simplices [M, d, d] (zero normal if degenerate).
+
+    The area vector is the generalised cross product of the d - 1 edge vectors: component k is the
+    determinant of the edges stacked over e_k, signed (-1)^(d+1) so that it points out in both
+    conventions (3D right-hand rule, 2D solid on the left); its length is (d - 1)! times the measure.
+    """
+    m, d = facets.shape[0], facets.shape[2]
+    if m == 0:
+        return np.zeros(0), np.zeros((0, d))
+    edges = facets[:, 1:] - facets[:, :1]  # [M, d-1, d]
+    rows = np.broadcast_to(np.eye(d)[None, :, None, :], (m, d, 1, d))
+    stacked = np.concatenate([np.broadcast_to(edges[:, None], (m, d, d - 1, d)), rows], axis=2)
+    area_vector = (-1) ** (d + 1) * np.linalg.det(stacked)  # [M, d]
+    norm = np.linalg.norm(area_vector, axis=1)
+    normals = area_vector / np.where(norm > 0, norm, 1.0)[:, None]
+    return norm / math.factorial(d - 1), normals
+
+
+def _gauss_rule(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Degree-5 rule on the reference simplex of a (d-1)-dimensional facet: barycentric points [q, d]
+    and weights [q] summing to 1 (fractions of the facet's measure)."""
+    if d == 2:
+        x, w = np.polynomial.legendre.leggauss(3)
+        t = 0.5 * (1.0 + x)
+        return np.stack([1.0 - t, t], axis=1), 0.5 * w
+    r = math.sqrt(15.0)
+    points, weights = [np.full(3, 1.0 / 3.0)], [9.0 / 40.0]
+    for c, w in (((6.0 - r) / 21.0, (155.0 - r) / 1200.0), ((6.0 + r) / 21.0, (155.0 + r) / 1200.0)):
+        for k in range(3):
+            p = np.full(3, c)
+            p[k] = 1.0 - 2.0 * c
+            points.append(p)
+            weights.append(w)
+    return np.array(points), np.array(weights)

@@ -1,0 +1,279 @@
+"""Displacement boundaries of the staggered method: Nitsche's method on the surface patch.
+
+A displacement boundary holds the solid's surface where its patch is, at sub-cell accuracy: the
+discrete energy gains, at the patch's quadrature points x_q (weights w_q, outward normals n_q,
+prescribed components P_q, values g_q),
+
+    - sum_q w_q (sigma_h(u) n_q) . P_q (u_h(x_q) - g_q) + 1/2 sum_q w_q gamma_q |P_q (u_h(x_q) - g_q)|^2
+
+where u_h is the interpolation that every output reads (multilinear over the active samples,
+``sampling.interpolate``) and sigma_h the staggered stress of a *source cell* near x_q: normal
+strains from the cell's faces, shear strains the edge-fraction-weighted mean of its four edges
+per pair (the strains the energy weighs). Its Hessian S adds to the operator, its gradient at
+u = 0 to the loads: symmetric, consistent (an exact solution leaves the first term zero), and
+positive definite with the penalty below.
+
+Coercivity. A cell s with fill m_s (the smaller of its cell fraction and, per axis pair, a quarter
+of its four edge fractions) owns at least m_s h^d eps_s : C : eps_s of the energy a(v, v) (cell
+terms wholly, a quarter of each edge), and |sigma n|^2 <= Lambda eps : C eps with
+Lambda = 2 mu + d max(lambda, 0). With A_s the patch area whose flux s carries, Young's inequality
+gives a_N(v, v) >= a(v, v) / 2 + sum_q w_q gamma_q / 2 |P v|^2 for
+gamma_s = COERCIVITY A_s Lambda / (h^d m_s). A cut cell holding a sliver would need a huge
+gamma_s, so a point's source is its own cell only when that cell's fill is at least TAU, else the
+nearest cell of its 3^d block that has (the best filled one when none has): the flux is then one
+cell off, still first order in h like the cell's own constant stress.
+
+The operator is stored factored, S = mass - F Sig - (F Sig)^T on the DOFs it touches (compact
+numbering): ``stress`` Sig [m, n] maps samples to the source cells' Voigt stresses, ``flux`` F
+[n, m] the stresses to forces (sum_q w_q phi_I(x_q) P_q n_q), ``mass`` [n, n] the penalty; the
+assembled product would hold ~8x more entries. Every multigrid level gets its own S from the
+same quadrature (rediscretised, like the volume terms).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..boundary import Prescribed, select_patch, surface_quadrature
+from ..errors import BoundaryError
+from ..geometry.surface import Surface
+from .operator import Level, pairs
+from .sampling import _corner_weights, _corners, _unique_rows
+
+TAU = 0.5  # a point's source cell is its own when that cell's fill reaches this
+COERCIVITY = 4.0  # gamma_s over the smallest penalty that keeps a_N(v, v) >= a(v, v) / 2
+CHUNK = 200_000  # quadrature points per pass of the per-point products (bounds temporaries)
+
+
+@dataclass(frozen=True)
+class HoldQuadrature:
+    """Quadrature of every displacement patch: points [Q, d] [m], weights [Q] [m^2 | m], unit
+    outward normals [Q, d], prescribed components mask [Q, d] (0 / 1) and values [Q, d] [m]
+    (0 where free)."""
+
+    points: np.ndarray
+    weights: np.ndarray
+    normals: np.ndarray
+    mask: np.ndarray
+    values: np.ndarray
+
+
+def hold_quadrature(prescribed: list[Prescribed], surface: Surface, spacing: float) -> HoldQuadrature | None:
+    """The quadrature of the displacement boundaries' patches (None when there are none); a
+    boundary whose region holds no surface is an error naming it."""
+    if not prescribed:
+        return None
+    d = surface.dim
+    facets = surface.vertices[surface.faces]
+    parts = []
+    for bc in prescribed:
+        pieces, _ = select_patch(bc.region, facets, bc.name)
+        x, w, n = surface_quadrature(pieces.reshape(-1, d, d), spacing)
+        mask = np.broadcast_to(bc.mask(d).astype(float), (len(w), d))
+        parts.append((x, w, n, mask, bc.values(x)))
+    return HoldQuadrature(*(np.concatenate(p) for p in zip(*parts)))
+
+
+@dataclass
+class SurfaceOperator:
+    """The Nitsche terms on one level: S = mass - flux stress - (flux stress)^T over the DOFs
+    (comp [n], pos [n]) (sorted by comp * size + pos); ``rhs`` [n] [N] their load for the
+    prescribed values at scale 1; ``diagonal`` [n] of S."""
+
+    comp: np.ndarray
+    pos: np.ndarray
+    mass: sp.csr_matrix
+    flux: sp.csr_matrix
+    stress: sp.csr_matrix
+    rhs: np.ndarray
+
+    def matrix(self) -> sp.csr_matrix:
+        """S assembled [n, n] (for the coarsest level's factorisation and for tests)."""
+        b = (self.flux @ self.stress).tocsr()
+        return (self.mass - b - b.T).tocsr()
+
+    @property
+    def diagonal(self) -> np.ndarray:
+        b = np.asarray(self.flux.multiply(self.stress.T.tocsr()).sum(axis=1)).ravel()
+        return self.mass.diagonal() - 2.0 * b
+
+
+def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator:
+    """The Nitsche terms of ``quad`` on ``level`` (whose ``origin`` must be known)."""
+    d, h, lay = level.dim, level.spacing, level.layout
+    origin = np.asarray(level.origin, dtype=float)
+    nv = d + len(pairs(d))
+    lam, mu = level.lam, level.mu
+    big = 2.0 * mu + d * max(lam, 0.0)  # Lambda: |sigma n|^2 <= Lambda eps : C eps
+    x, w = quad.points, quad.weights
+    src, sources, fill = _sources(level, np.floor((x - origin) / h).astype(np.int64))
+    area = np.bincount(src, weights=w, minlength=len(sources))
+    gamma = (COERCIVITY * big / h**d) * area / fill  # [sources]
+    gw = w * gamma[src]  # w_q gamma_q
+    size = level.size
+    keys, entries = [], []  # (row key, col key or column, value) triples per block
+
+    # stress functional Sig: rows s * nv + v (Voigt: normals, then pairs), columns sample keys
+    s_rows, s_keys, s_vals = _stress_rows(level, sources, nv)
+    # interpolation of each component at the points, on the active samples, renormalised
+    mass_r, mass_c, mass_v = [], [], []
+    flux_r, flux_c, flux_v = [], [], []
+    pen = []
+    corners = _corners(d)
+    k = len(corners)
+    voigt = {a: [(a, a)] + [(d + q, b if p == a else p) for q, (p, b) in enumerate(pairs(d)) if a in (p, b)]
+             for a in range(d)}
+    for a in range(d):
+        on = np.nonzero(quad.mask[:, a] > 0)[0]
+        if not len(on):
+            continue
+        shift = 0.5 - 0.5 * np.eye(d)[a]
+        xi = (x[on] - origin) / h - shift
+        base = np.floor(xi).astype(np.int64)
+        phi = _corner_weights(xi - base)  # [N, 2^d]
+        cells, cell_of = _unique_rows(base)
+        near = (cells[:, None, :] + corners[None]).reshape(-1, d)
+        near_pos = lay.positions(near)
+        act = (near_pos >= 0) & level.active[a, np.maximum(near_pos, 0)]
+        phi = np.where(act.reshape(len(cells), k)[cell_of], phi, 0.0)
+        total = phi.sum(axis=1)
+        if np.any(total == 0):
+            bad = x[on][total == 0]
+            raise BoundaryError(
+                f"boundaries: {len(bad)} surface points of a displacement patch (near {np.round(bad[0], 6).tolist()} m) "
+                "have no displacement sample in the material the grid resolves; refine the grid"
+            )
+        phi /= total[:, None]
+        sample_key = a * size + near_pos  # [cells * 2^d]
+        # penalty mass: w gamma phi_I phi_J summed per (cell, I, J) slot
+        slot_mass = np.zeros(len(cells) * k * k)
+        slot_pen = np.zeros(len(cells) * k)
+        # flux: w phi_I n_j per (source, cell) pair and (I, voigt slot)
+        pair_rows, pair_of = _unique_rows(np.stack([src[on], cell_of], axis=1))
+        vs = voigt[a]
+        slot_flux = np.zeros(len(pair_rows) * k * len(vs))
+        for start in range(0, len(on), CHUNK):
+            part = slice(start, start + CHUNK)
+            p, c = phi[part], cell_of[part]
+            q = on[part]
+            slot_mass += np.bincount(((c * k)[:, None, None] * k + np.arange(k)[None, :, None] * k
+                                      + np.arange(k)[None, None, :]).ravel(),
+                                     weights=(gw[q][:, None, None] * p[:, :, None] * p[:, None, :]).ravel(),
+                                     minlength=len(slot_mass))
+            slot_pen += np.bincount((c[:, None] * k + np.arange(k)[None, :]).ravel(),
+                                    weights=(gw[q] * quad.values[q, a])[:, None].repeat(k, 1).ravel() * p.ravel(),
+                                    minlength=len(slot_pen))
+            normals = np.stack([quad.normals[q, j] for _, j in vs], axis=1)  # [N, len(vs)]
+            slot_flux += np.bincount(((pair_of[part] * k)[:, None, None] * len(vs)
+                                      + np.arange(k)[None, :, None] * len(vs) + np.arange(len(vs))[None, None, :]).ravel(),
+                                     weights=(w[q][:, None, None] * p[:, :, None] * normals[:, None, :]).ravel(),
+                                     minlength=len(slot_flux))
+        sm = slot_mass.reshape(len(cells), k, k)
+        nz = np.nonzero(sm)
+        mass_r.append(sample_key.reshape(-1, k)[nz[0], nz[1]])
+        mass_c.append(sample_key.reshape(-1, k)[nz[0], nz[2]])
+        mass_v.append(sm[nz])
+        nz = np.nonzero(slot_pen)[0]
+        pen.append((sample_key[nz], slot_pen[nz]))
+        sf = slot_flux.reshape(len(pair_rows), k, len(vs))
+        nz = np.nonzero(sf)
+        flux_r.append(sample_key.reshape(-1, k)[pair_rows[nz[0], 1], nz[1]])
+        flux_c.append(pair_rows[nz[0], 0] * nv + np.array([v for v, _ in vs])[nz[2]])
+        flux_v.append(sf[nz])
+    # the compact numbering of every DOF the terms touch
+    every = np.unique(np.concatenate(mass_r + flux_r + [s_keys]))
+    n, m = len(every), len(sources) * nv
+    at = lambda key: np.searchsorted(every, key)  # noqa: E731
+    mass = sp.csr_matrix((np.concatenate(mass_v), (at(np.concatenate(mass_r)), at(np.concatenate(mass_c)))), (n, n))
+    flux = sp.csr_matrix((np.concatenate(flux_v), (at(np.concatenate(flux_r)), np.concatenate(flux_c))), (n, m))
+    stress = sp.csr_matrix((s_vals, (s_rows, at(s_keys))), (m, n))
+    # load of the values: Phi^T (w gamma P g) - Sig^T h, h_{s, v} = sum_q w_q (P g (x) n)_v, symmetrised
+    rhs = np.zeros(n)
+    for key, val in pen:
+        np.add.at(rhs, at(key), val)
+    hg = np.zeros(m)
+    pg = quad.mask * quad.values
+    for a in range(d):
+        for v, j in voigt[a]:
+            hg += np.bincount(src * nv + v, weights=w * pg[:, a] * quad.normals[:, j], minlength=m)
+    rhs -= stress.T @ hg
+    comp, pos = every // size, every % size
+    return SurfaceOperator(comp, pos, mass, flux, stress, rhs)
+
+
+def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source cell of each point given its cell index [Q, d]: (source number [Q], source cell
+    indices [S, d], their fills [S] > 0)."""
+    d = level.dim
+    cells, cell_of = _unique_rows(cell)
+    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+    cand = cells[:, None, :] + offsets[None]
+    fill = cell_fill(level, cand.reshape(-1, d)).reshape(len(cells), -1)
+    if np.any(fill.max(axis=1) <= 0):
+        raise BoundaryError("boundaries: a displacement patch lies where the grid resolves no material around it; "
+                            "refine the grid")
+    # any cell filled to TAU beats every other; among those the nearest, then the fuller
+    distance = np.abs(offsets).sum(axis=1)
+    score = np.where(fill >= TAU, 10.0 - distance[None, :] + 0.1 * fill, fill)
+    chosen = cand[np.arange(len(cells)), score.argmax(axis=1)]
+    sources, source_of = _unique_rows(chosen)
+    return source_of[cell_of], sources, cell_fill(level, sources)
+
+
+def cell_fill(level: Level, cell: np.ndarray) -> np.ndarray:
+    """Fill [N] of cells [N, d] (indices; outside the kept tiles: 0): the cell's fraction and, per
+    axis pair, a quarter of the sum of its four edge fractions, whichever is least."""
+    lay, d = level.layout, level.dim
+    pos = lay.positions(cell)
+    out = np.where(pos >= 0, level.vc_host[np.maximum(pos, 0)], 0.0)
+    eye = np.eye(d, dtype=np.int64)
+    for q, (a, b) in enumerate(pairs(d)):
+        total = np.zeros(len(cell))
+        for i, j in itertools.product((0, 1), repeat=2):
+            p = lay.positions(cell + i * eye[a] + j * eye[b])
+            total += np.where(p >= 0, level.ve_host[q, np.maximum(p, 0)], 0.0)
+        out = np.minimum(out, 0.25 * total)
+    return out
+
+
+def _stress_rows(level: Level, cells: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Voigt stresses of cells [S, d] as linear functionals of the samples: (rows s * nv + v,
+    sample keys a * size + position, coefficients [Pa / m]). Normal strains from the cell's faces,
+    shear strains the edge-fraction-weighted mean over its four edges (every cell here has fill > 0,
+    so each pair has an edge that holds material and whose samples are active)."""
+    lay, d, h, size = level.layout, level.dim, level.spacing, level.size
+    lam, mu = level.lam, level.mu
+    eye = np.eye(d, dtype=np.int64)
+    s = np.arange(len(cells))
+    rows, keys, vals = [], [], []
+
+    def add(row, a, index, coef):
+        pos = lay.positions(index)
+        keep = (coef != 0) & (pos >= 0)
+        rows.append(row[keep])
+        keys.append(a * size + pos[keep])
+        vals.append(coef[keep])
+
+    one = np.ones(len(cells))
+    for a in range(d):  # sigma_kk = lam tr eps + 2 mu eps_kk
+        for k in range(d):
+            c = (lam + 2.0 * mu * (a == k)) / h
+            add(s * nv + k, a, cells + eye[a], c * one)
+            add(s * nv + k, a, cells, -c * one)
+    for q, (a, b) in enumerate(pairs(d)):  # sigma_ab = 2 mu eps_ab
+        edges = [cells + i * eye[a] + j * eye[b] for i, j in itertools.product((0, 1), repeat=2)]
+        weight = np.stack([np.where((p := lay.positions(e)) >= 0, level.ve_host[q, np.maximum(p, 0)], 0.0)
+                           for e in edges], axis=1)
+        weight /= weight.sum(axis=1, keepdims=True)
+        for e, wt in zip(edges, weight.T):
+            c = 2.0 * mu * 0.5 / h * wt  # eps_e = (u_a(E) - u_a(E - e_b) + u_b(E) - u_b(E - e_a)) / (2 h)
+            row = s * nv + d + q
+            add(row, a, e, c)
+            add(row, a, e - eye[b], -c)
+            add(row, b, e, c)
+            add(row, b, e - eye[a], -c)
+    return np.concatenate(rows), np.concatenate(keys), np.concatenate(vals)
