@@ -10,7 +10,10 @@ MemoryError instead of swapping the machine) and that exits when the check is do
 Children are forked from a *forkserver* that imported the engine once (about a second), so
 each check starts in milliseconds and from a process that never ran a request: no lock held by
 another thread of the API process can be inherited. At most ``os.cpu_count()`` (at least 2)
-checks run at once; further requests wait for a slot.
+checks run at once; further requests wait for a slot. As with every multiprocessing start method
+but fork, a child imports the parent's ``__main__`` module again (as ``__mp_main__``): a program
+that starts the service must keep its start-up under ``if __name__ == "__main__"`` (``voxelastic
+serve``, ``python -m engine.cli serve`` and uvicorn's own entry point do).
 """
 
 from __future__ import annotations
