@@ -1,0 +1,44 @@
+"""/health tells the truth about the workers (issue 18 item 10): a server whose worker processes
+cannot start (in the Docker image it was Taichi's missing libX11.so.6) answers 503 and says why,
+where it used to answer "ok" with 0 processes alive while every job failed."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import httpx
+from service_helpers import ROOT, Server, cantilever
+
+
+def test_health_is_503_with_the_reason_when_no_worker_process_can_start(tmp_path):
+    # a real start failure: the Taichi kernel cache directory cannot be created (a file is in the way)
+    blocked = tmp_path / "cache-is-a-file"
+    blocked.write_text("not a directory\n")
+    srv = Server(tmp_path / "data", str(blocked), workers=1)
+    log = open(srv.log_path, "ab")
+    srv.proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "serve", "--host", "127.0.0.1", "--port",
+                                 str(srv.port), "--log-level", "warning"], cwd=ROOT, env=srv.env(), stdout=log,
+                                stderr=subprocess.STDOUT)
+    try:
+        deadline, body, status = time.monotonic() + 120, {}, None
+        while time.monotonic() < deadline:
+            try:
+                r = httpx.get(srv.url + "/health", timeout=5)
+                status, body = r.status_code, r.json()
+                if body.get("queue", {}).get("worker_error"):
+                    break
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.2)
+        assert status == 503, (status, body, srv.log()[-2000:])
+        assert body["status"] == "unavailable" and body["database"] == "ok"
+        assert body["queue"]["processes_alive"] == 0
+        reason = body["queue"]["worker_error"]
+        assert "failed to start" in reason and "cache-is-a-file" in reason, reason
+        # what a job gets meanwhile: failed, with the same reason
+        job = srv.wait(srv.submit_ok(cantilever(16)))
+        assert job["status"] == "failed" and "failed to start" in job["error"], job
+    finally:
+        srv.close()
