@@ -111,7 +111,11 @@ def load_surface(
                 f"cannot read mesh '{name}': no mesh found in the file"
                 f" (is it a valid {files[0][2].upper()} file?)"
             )
-    surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name)
+    # STL stores every facet with its own three corners: merging them is the format's normal case,
+    # not news for the user (issue 18); other formats share vertices, so merges there are reported
+    stl = not isinstance(source, (trimesh.Trimesh, trimesh.Scene)) and all(
+        t in ("stl", "stl_ascii") for _, _, t in files)
+    surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name, report_merges=not stl)
     surface.warnings[:0] = notes
     return surface
 
@@ -123,10 +127,12 @@ def mesh_surface(
     scale: float = 1.0,
     transform: np.ndarray | None = None,
     name: str = "mesh",
+    report_merges: bool = True,
 ) -> Surface:
     """Validate, place and repair a triangle mesh: vertices [m, 3] [m], faces [k, 3] int.
 
-    Steps and warnings as in the module docstring; ``name`` labels error messages.
+    Steps and warnings as in the module docstring; ``name`` labels error messages;
+    ``report_merges=False`` merges coincident vertices without a warning (STL input).
     """
     vertices, faces = _checked_arrays(vertices, faces, name)
     vertices, mirrored = place(vertices, scale, transform, name)
@@ -134,7 +140,7 @@ def mesh_surface(
     if mirrored:
         faces = faces[:, ::-1]
         warnings.append("the transform mirrors the geometry: reversed all faces to keep them outward")
-    vertices, faces = _merge_vertices(vertices, faces, warnings)
+    vertices, faces = _merge_vertices(vertices, faces, warnings if report_merges else [])
     faces = _require_faces(_drop_bad_faces(faces, warnings), name)
     vertices, faces = _drop_unused_vertices(vertices, faces, warnings)
     faces = _orient_consistently(faces, len(vertices), warnings)
