@@ -1,17 +1,25 @@
 """``voxelastic`` command line: validate a job, voxelize a mesh, run a job.
 
 Bad input ends with exit code 2 and one clear line per problem on stderr, never a traceback.
+``validate``, ``voxelize`` and ``run`` apply the same limits (facets, grid cells, memory
+estimate: ``engine.pipeline.Limits``) before any work, and ``voxelize`` and ``run`` check that
+the output can be written (directory writable, space for the estimated result) before it, not
+after the solve. Ctrl-C ends with one line and exit code 130; the result's temporary files are
+removed on the way out (``engine.output.write_result``).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for a job stopped by Ctrl-C
 
 
 def _error(lines: list[str] | str) -> int:
@@ -32,6 +40,69 @@ def _read_spec(path: str):
         return exc.errors
 
 
+def _output_problem(path: str) -> str | None:
+    """Why a result cannot be written at ``path`` (None if it can), found before any work."""
+    p = Path(path)
+    if p.suffix == ".xdmf":
+        return f"{path}: the HDF5 result needs another suffix than .xdmf (e.g. .h5)"
+    if p.is_dir():
+        return f"cannot write the result to '{path}': it is a directory"
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        return f"cannot write the result to '{path}': the directory '{parent}' does not exist"
+    try:  # the way the result is written: a temporary file beside it, renamed
+        fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{p.name}.", suffix=".check")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        return f"cannot write the result to '{path}': {exc.strerror or exc} in '{parent}'"
+    return None
+
+
+class _NoRoom(Exception):
+    """The disk holding the output has less room than the result may need."""
+
+
+def _check_room(path: str, shape, fields, *, levels: int = 1, vertices: int = 0, probes: int = 0) -> None:
+    from .output import estimate_result_bytes
+
+    need = estimate_result_bytes(shape, fields, levels=levels, surface_vertices=vertices, probes=probes)
+    free = shutil.disk_usage(Path(path).parent if str(Path(path).parent) else ".").free
+    if free < need:
+        raise _NoRoom(f"cannot write the result to '{path}': {free / 2**20:.1f} MiB free there, the result of a "
+                      f"{'x'.join(map(str, shape))} grid may need up to {need / 2**20:.1f} MiB")
+
+
+def _admit(spec, base_dir: Path):
+    """Load the job's geometry and build its grid under the limits ``run`` applies; returns
+    (surface, grid). Raises the engine's errors (GeometryError, GridError) with their messages."""
+    from .errors import GeometryError
+    from .grid import make_grid
+    from .pipeline import Limits, load_geometry
+
+    limits = Limits()
+    surface, _ = load_geometry(spec, base_dir=base_dir)
+    if len(surface.faces) > limits.max_triangles:
+        raise GeometryError(f"geometry.mesh: {len(surface.faces)} facets exceed the limit of {limits.max_triangles}")
+    g = spec.grid
+    grid = make_grid(*surface.bounds, cell_size=g.cell_size, resolution=g.resolution, padding=g.padding,
+                     max_cells=limits.max_cells)
+    _check_memory(grid, spec.method.kind, getattr(spec.method, "degree", 1), limits)
+    return surface, grid
+
+
+def _check_memory(grid, method: str, degree: int, limits) -> None:
+    from .errors import GridError
+    from .pipeline import estimate_memory
+
+    need = estimate_memory(grid, method, degree)
+    if need > limits.max_memory_bytes:
+        raise GridError(
+            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
+            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB (VOXELASTIC_MAX_MEMORY_GB); increase "
+            "the cell size or lower the resolution")
+
+
 class ProgressBar:
     """One self-overwriting line on stderr: ``[#####.....]  50%  stage  detail``."""
 
@@ -40,6 +111,8 @@ class ProgressBar:
         self.tty = stream.isatty()
 
     def __call__(self, stage: str, fraction: float, info: dict) -> None:
+        if not self.tty and stage == "geometry":
+            return  # a log gets lines from the grid on: a job refused by the checks stays one line
         filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
         detail = " ".join(f"{k}={v}" for k, v in info.items())
         line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:3.0f}% {stage:10s} {detail}"
@@ -47,16 +120,24 @@ class ProgressBar:
         self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
         self.stream.flush()
 
-    def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
+    def close(self, failed: bool = False) -> None:
+        if self.tty:  # after a failure the bar goes: the error is the one line left
+            self.stream.write("\r\x1b[K" if failed else "\n")
+            self.stream.flush()
 
 
 def cmd_validate(args) -> int:
+    from .errors import VoxelasticError
+
     spec = _read_spec(args.job)
     if isinstance(spec, list):
         return _error(spec)
-    print(f"OK: {args.job} ({spec.dimension}D, method {spec.method.kind}, analysis {spec.analysis.kind})")
+    try:  # what run checks before any work: the mesh, its facets, the grid and its memory estimate
+        surface, grid = _admit(spec, Path(args.job).resolve().parent)
+    except VoxelasticError as exc:
+        return _error(str(exc))
+    print(f"OK: {args.job} ({spec.dimension}D, method {spec.method.kind}, analysis {spec.analysis.kind}, "
+          f"{len(surface.faces)} facets, grid {'x'.join(map(str, grid.shape))})")
     return 0
 
 
@@ -66,21 +147,32 @@ def cmd_voxelize(args) -> int:
     from .geometry.loading import load_surface
     from .grid import make_grid
     from .output import write_result
-    from .pipeline import Geometry, geometry_result
+    from .pipeline import Geometry, Limits, geometry_result
     from .runtime import init
 
+    problem = _output_problem(args.output)
+    if problem:
+        return _error(problem)
     try:
-        init("cpu", "f64")
         t = time.perf_counter()
         surface = load_surface(args.mesh, dimension=args.dimension, scale=args.scale)
-        grid = make_grid(*surface.bounds, cell_size=args.cell_size, resolution=args.resolution, padding=args.padding)
+        limits = Limits()
+        if len(surface.faces) > limits.max_triangles:
+            return _error(f"{args.mesh}: {len(surface.faces)} facets exceed the limit of {limits.max_triangles}")
+        grid = make_grid(*surface.bounds, cell_size=args.cell_size, resolution=args.resolution, padding=args.padding,
+                         max_cells=limits.max_cells)
+        _check_memory(grid, "staggered", 1, limits)  # the staggered geometry stage is what runs here
+        _check_room(args.output, grid.shape, [], vertices=len(surface.vertices))
+        init("cpu", "f64")
         vf = volume_fractions(surface, grid)
         spec = {"geometry": {"mesh": Path(args.mesh).name, "scale": args.scale}, "grid": grid.to_dict(), "dimension": args.dimension}
         warnings = surface.warnings + vf.warnings
         geo = Geometry(surface, grid, fractions=vf, warnings=warnings, stage_times={"voxelize": time.perf_counter() - t})
         path = write_result(geometry_result(spec, geo, "voxelize"), args.output)
-    except VoxelasticError as exc:
+    except (VoxelasticError, _NoRoom) as exc:
         return _error(str(exc))
+    except OSError as exc:  # the disk said no while writing (it had room when checked)
+        return _error(f"cannot write the result to '{args.output}': {exc.strerror or exc}")
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     exact = surface.enclosed_volume()
@@ -94,27 +186,46 @@ def cmd_voxelize(args) -> int:
 def cmd_run(args) -> int:
     from .errors import VoxelasticError
     from .geometry.cache import GeometryCache, default_directory
-    from .output import write_result
+    from .output import outside_probes_warning, write_result
     from .pipeline import run
 
     spec = _read_spec(args.job)
     if isinstance(spec, list):
         return _error(spec)
+    problem = _output_problem(args.output)
+    if problem:
+        return _error(problem)
     if args.arch:
         spec = spec.model_copy(update={"solver": spec.solver.model_copy(update={"arch": args.arch})})
     bar = ProgressBar()
+    levels = 1 + (spec.analysis.steps if spec.analysis.kind != "static" else 0)
+
+    def progress(stage: str, fraction: float, info: dict) -> None:
+        if stage == "grid":  # the grid is known, nothing large is allocated yet: is there room?
+            _check_room(args.output, info["shape"], spec.output.fields, levels=levels, probes=len(spec.output.probes))
+        bar(stage, fraction, info)
+
     try:
         result = run(
             spec,
             base_dir=Path(args.job).resolve().parent,
-            progress=bar,
+            progress=progress,
             cache=GeometryCache(None if args.no_cache else default_directory()),
         )
-    except VoxelasticError as exc:  # bad input, or a method not available yet
+        note = outside_probes_warning(result)
+        if note:
+            if result.solver is not None:
+                result.solver.warnings.append(note)
         bar.close()
+        path = write_result(result, args.output)
+    except (VoxelasticError, _NoRoom) as exc:  # bad input, a limit, a method not available yet, no room
+        bar.close(failed=True)
         return _error(str(exc))
-    bar.close()
-    path = write_result(result, args.output)
+    except OSError as exc:  # the disk said no while writing (it had room when checked)
+        bar.close(failed=True)
+        return _error(f"cannot write the result to '{args.output}': {exc.strerror or exc}")
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
     print(f"{path}")
     return 0
 
@@ -164,7 +275,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        # temporary files went with the unwinding (write_result and the geometry cache remove theirs)
+        print(("\r\x1b[K" if sys.stderr.isatty() else "") + "interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -350,6 +350,29 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def outside_probes_warning(result: Result, shown: int = 5) -> str | None:
+    """A warning naming the probes that lie outside the solid (their values are NaN), or None.
+
+    A probe in a cell without material has nothing to sample; a NaN in the file without a word
+    looked like a solver failure (issue 18).
+    """
+    if result.probe_points is None or not result.fields.probes:
+        return None
+    # outside, some fields have nothing to interpolate (NaN) while others may still reach in from
+    # a neighbouring face (the staggered displacement): any NaN marks the probe
+    n = len(result.probe_points)
+    outside = np.zeros(n, dtype=bool)
+    for values in result.fields.probes.values():
+        outside |= np.isnan(np.asarray(values, dtype=float).reshape(n, -1)).any(axis=1)
+    count = int(outside.sum())
+    if count == 0:
+        return None
+    where = ", ".join("(" + ", ".join(f"{c:g}" for c in point) + ")" for point in result.probe_points[outside][:shown])
+    more = f" and {count - shown} more" if count > shown else ""
+    return (f"{count} of {n} probes lie outside the solid, where there is nothing to sample "
+            f"(NaN in their values): {where}{more}")
+
+
 def estimate_result_bytes(shape: Sequence[int], fields: Sequence[str], *, levels: int = 1,
                           surface_vertices: int = 0, probes: int = 0) -> int:
     """Size of the result file before compression [bytes]: what a job needs free on the disk.

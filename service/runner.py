@@ -131,7 +131,7 @@ def run_task(task: Task, progress) -> tuple:
     """Run one attempt; returns ("done", summary) or ("error", kind, message)."""
     from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
-    from engine.output import write_result
+    from engine.output import outside_probes_warning, write_result
     from engine.pipeline import Limits, run
     from schemas import SpecError, parse_job
 
@@ -149,6 +149,9 @@ def run_task(task: Task, progress) -> tuple:
             cache=GeometryCache(task.geometry_cache),
             limits=Limits(max_cells=task.max_cells, max_memory_bytes=task.max_memory_bytes, max_triangles=task.max_triangles),
         )
+        note = outside_probes_warning(result)
+        if note and result.solver is not None:
+            result.solver.warnings.append(note)
         staging = Path(task.staging_dir)
         t_write = time.perf_counter()
         try:

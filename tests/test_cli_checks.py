@@ -1,0 +1,118 @@
+"""The CLI's checks before any work, Ctrl-C and probe warnings (issue 18 item 9), as real
+subprocesses: the same limits in validate / voxelize / run (exit 2, one line), an unwritable
+output found before the solve, Ctrl-C as one line with exit 130 and no temporary files left, probes
+outside the solid named in a warning, no note about STL's merged corners."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from engine.output import read_result
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "cantilever.json"
+STL = ROOT / "examples" / "cantilever.stl"
+ENV = {**os.environ, "TI_SKIP_VERSION_CHECK": "ON"}
+
+
+def cli(*args, cwd=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "engine.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=timeout, env=ENV)
+
+
+def job(tmp_path: Path, **changes) -> Path:
+    spec = json.loads(EXAMPLE.read_text())
+    for key, value in changes.items():
+        spec[key] = value
+    shutil.copy(STL, tmp_path / "cantilever.stl")
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def one_error_line(out: subprocess.CompletedProcess) -> str:
+    assert out.returncode == 2, (out.returncode, out.stderr[-2000:])
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), out.stderr[-2000:]
+    return lines[0]
+
+
+def test_the_same_grid_limit_in_validate_voxelize_and_run(tmp_path):
+    # 1 um cells on the 1 m bar: 4e16 cells (voxelize used to try a 1.16 TiB allocation)
+    huge = job(tmp_path, grid={"cell_size": 1e-6, "padding": 1})
+    t = time.perf_counter()
+    validate = one_error_line(cli("validate", huge))
+    run = one_error_line(cli("run", huge, "-o", tmp_path / "r.h5"))
+    voxelize = one_error_line(cli("voxelize", STL, "--cell-size", "1e-6", "-o", tmp_path / "v.h5"))
+    assert time.perf_counter() - t < 60
+    assert "4e+16 cells exceeds the limit" in validate
+    assert validate == run == voxelize
+    assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob(".*"))
+
+
+def test_validate_checks_what_run_checks_and_says_ok_otherwise(tmp_path):
+    dg = job(tmp_path, method={"kind": "dg", "degree": 2}, grid={"resolution": 400, "padding": 1})
+    line = one_error_line(cli("validate", dg))  # a memory estimate far over the limit
+    assert "GiB for method 'dg'" in line and "over the limit" in line
+    ok = cli("validate", job(tmp_path))
+    assert ok.returncode == 0 and ok.stdout.startswith("OK") and "grid 34x9x9" in ok.stdout, ok.stderr
+    (tmp_path / "cantilever.stl").unlink()
+    assert "geometry.mesh: cannot read" in one_error_line(cli("validate", tmp_path / "job.json"))
+
+
+@pytest.mark.parametrize("where", ["missing-dir", "directory", "proc"])
+def test_an_unwritable_output_is_found_before_any_work(tmp_path, where):
+    target = {"missing-dir": tmp_path / "no" / "such" / "out.h5", "directory": tmp_path,
+              "proc": Path("/proc/voxelastic-out.h5")}[where]
+    big = job(tmp_path, grid={"resolution": 96, "padding": 1})  # seconds of work if it started
+    for args in (("run", big, "-o", target), ("voxelize", STL, "--resolution", "96", "-o", target)):
+        t = time.perf_counter()
+        line = one_error_line(cli(*args))
+        assert "cannot write the result to" in line, line
+        assert time.perf_counter() - t < 5  # before the mesh is even read, let alone solved
+
+
+def test_ctrl_c_is_one_line_exit_130_and_no_temporary_files(tmp_path):
+    long = job(tmp_path, grid={"resolution": 48, "padding": 1},
+               analysis={"kind": "dynamic", "time_step": 1e-3, "steps": 400})
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "run", str(long), "-o", str(out / "r.h5"),
+                             "--no-cache"], stderr=subprocess.PIPE, text=True, env=ENV)
+    seen = []
+    for line in proc.stderr:  # until the solve runs
+        seen.append(line)
+        if " solve " in line:
+            break
+    proc.send_signal(signal.SIGINT)
+    rest = proc.stderr.read()
+    code = proc.wait(60)
+    assert code == 130, (code, rest[-3000:])
+    assert rest.strip().splitlines() == ["interrupted"] or rest.strip().splitlines()[-1] == "interrupted", rest
+    assert "Traceback" not in rest
+    assert list(out.iterdir()) == []
+
+
+def test_probes_outside_the_solid_are_a_warning_saying_how_many_and_where(tmp_path):
+    spec = job(tmp_path, grid={"resolution": 16, "padding": 2})
+    data = json.loads(spec.read_text())
+    # inside the bar; beyond its free end (x > 1) and beside it (y > 0.1), both still in the grid
+    data["output"]["probes"] = [[0.5, 0, 0], [1.08, 0, 0], [0.5, 0.16, 0]]
+    spec.write_text(json.dumps(data))
+    out = cli("run", spec, "-o", tmp_path / "r.h5", "--no-cache")
+    assert out.returncode == 0, out.stderr
+    warnings = [line for line in out.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == ["warning: 2 of 3 probes lie outside the solid, where there is nothing to sample "
+                        "(NaN in their values): (1.08, 0, 0), (0.5, 0.16, 0)"], out.stderr
+    assert "merged" not in out.stderr  # STL shares no corners: merging them is not worth a word
+    result = read_result(tmp_path / "r.h5")
+    assert any("2 of 3 probes lie outside the solid" in w for w in result.solver.warnings)
