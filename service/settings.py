@@ -55,6 +55,11 @@ class Settings(BaseSettings):
     worker_nice: int = Field(
         10, ge=0, le=19, description="Niceness of worker processes, so the API stays responsive while they compute."
     )
+    api_nice: int = Field(
+        -10, ge=-20, le=0, description="Niceness the API process raises itself to at start where permitted "
+        "(CAP_SYS_NICE or RLIMIT_NICE), so status requests are answered while other processes hold every core; "
+        "workers run worker_nice below it."
+    )
     max_attempts: int = Field(3, ge=1, le=20, description="Runs of a job before a lost worker fails it.")
 
     # --- limits ---------------------------------------------------------------------------------
