@@ -49,11 +49,19 @@ def rotations(method, u: np.ndarray) -> np.ndarray:
     return U @ Vt
 
 
-def _rotated(data: np.ndarray, left: np.ndarray, right: np.ndarray, R: np.ndarray) -> np.ndarray:
-    out = np.empty_like(data)
+def _rotated(data: np.ndarray, left: np.ndarray, right: np.ndarray, R: np.ndarray,
+             out: np.ndarray | None = None) -> np.ndarray:
+    out = np.empty_like(data) if out is None else out
     kernels.rotate_blocks(np.ascontiguousarray(data), left.astype(np.int32), right.astype(np.int32),
                           np.ascontiguousarray(R), out)
     return out
+
+
+# Blocks warped per pass: the half-warped copies, their differences and the mirrors are made for
+# this many blocks at a time, so a refactorisation holds the group and its warped copy and little
+# else (for whole groups at once the temporaries were ~3 more copies: a 20-cell k = 2 torus peaked
+# at 1.62x the linear job's memory; issue 18).
+CHUNK = 4096
 
 
 def rotate(groups: list[Group], R: np.ndarray, X0: np.ndarray) -> tuple[list[Group], np.ndarray]:
@@ -69,15 +77,20 @@ def rotate(groups: list[Group], R: np.ndarray, X0: np.ndarray) -> tuple[list[Gro
         if g.owner is None:
             out.append(g)
             continue
-        full = _rotated(g.data, g.owner, g.owner, Rx)
-        half = _rotated(g.data, g.owner, np.full(len(g.owner), E), Rx)
-        diff = half - full
-        np.add.at(load, g.rows, np.einsum("kij,kj->ki", diff, X0f[g.cols]))
-        off = g.rows != g.cols
-        if np.any(off):
-            # mirrored block (cols, rows): (R K)^T acts as K^T R^T; its warped force is R K^T X0 - R K^T R^T X0
-            mirror = _rotated(g.data[off].transpose(0, 2, 1).copy(), g.owner[off], np.full(int(off.sum()), E), Rx)
-            np.add.at(load, g.cols[off], np.einsum("kij,kj->ki", mirror - full[off].transpose(0, 2, 1), X0f[g.rows[off]]))
+        full = np.empty_like(g.data)
+        for a in range(0, len(g.data), CHUNK):
+            part = slice(a, min(a + CHUNK, len(g.data)))
+            data, owner, rows, cols = g.data[part], g.owner[part], g.rows[part], g.cols[part]
+            warped = _rotated(data, owner, owner, Rx, out=full[part])
+            half = _rotated(data, owner, np.full(len(owner), E), Rx)
+            np.add.at(load, rows, np.einsum("kij,kj->ki", half - warped, X0f[cols]))
+            off = rows != cols
+            if np.any(off):
+                # mirrored block (cols, rows): (R K)^T acts as K^T R^T; its warped force is
+                # R K^T X0 - R K^T R^T X0
+                mirror = _rotated(data[off].transpose(0, 2, 1).copy(), owner[off], np.full(int(off.sum()), E), Rx)
+                np.add.at(load, cols[off], np.einsum("kij,kj->ki", mirror - warped[off].transpose(0, 2, 1),
+                                                     X0f[rows[off]]))
         out.append(Group(g.rows, g.cols, full, None))
     return out, load.reshape(X0.shape)
 
