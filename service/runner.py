@@ -184,5 +184,7 @@ def run_task(task: Task, progress) -> tuple:
     except MemoryError:
         return ("error", "limit", "the job ran out of memory in its worker process; use a coarser grid")
     except Exception as exc:  # a bug: keep the worker alive, tell the user plainly, log the trace
+        if is_storage_fault(exc):  # a working file on the way (the geometry cache): the server's disk
+            return ("error", ERROR_KIND, describe(exc, "a working file of the job (mesh copy, geometry cache)"))
         traceback.print_exc(file=sys.stderr)
         return ("error", "internal", f"internal error: {type(exc).__name__}: {exc}")
