@@ -28,7 +28,8 @@ def _shell_method(resolution: int, degree: int):
     import numpy as np
     import trimesh
 
-    from engine.dg.elasticity import DGElasticity, Prescribed
+    from engine.boundary import Prescribed
+    from engine.dg.elasticity import DGElasticity
     from engine.geometry.slicing import slice_cells
     from engine.geometry.surface import Surface
     from engine.grid import make_grid

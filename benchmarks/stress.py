@@ -531,7 +531,7 @@ def cantilever_job(method: dict, h: float, bar: Bar, *, traction: float = TIP_TR
     ``exact_faces``: the regions lie exactly on the end faces (DG clamp too) instead of reaching
     FACE_SLACK h past them."""
     slack = 0.0 if exact_faces else FACE_SLACK * h
-    depth = clamp_depth(method, h) if method["kind"] == "staggered" else slack
+    depth = slack  # both methods hold the end face (the surface patch inside the region)
     boundaries = [
         {"kind": "displacement", "name": "clamp", "region": bar.beyond(depth, -1), "value": [0, 0, 0]},
         {"kind": "traction", "name": "tip", "region": bar.end(+1, slack), "value": bar.direction(1, traction)},

@@ -7,13 +7,13 @@ import pytest
 import trimesh
 
 from benchmarks.problems import problem
-from engine.dg.elasticity import DGElasticity, Prescribed
+from engine.boundary import Prescribed, SurfaceLoad
+from engine.dg.elasticity import DGElasticity
 from engine.geometry.slicing import slice_cells
 from engine.grid import Grid, make_grid
 from engine.material import Material
 from engine.regions import Halfspaces
 from engine.runtime import init
-from engine.staggered.elasticity import SurfaceLoad
 from tests.conftest import surface_of
 
 init("cpu", "f64")

@@ -73,27 +73,23 @@ def test_polygon_spec_in_2d():
 
 
 def test_run_staggered_and_dg_end_to_end():
-    spec = cantilever_spec(resolution=16)
+    # 6 cells across the 0.2 m section: at 3 the cut cells' bending stiffness is off by up to 30%
+    # (each partial layer's strain is weighed at its cell centre)
+    spec = cantilever_spec(resolution=32)
     result = run(spec, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))
     tip = result.fields.probes["displacement"][0]
-    # Euler-Bernoulli: gravity q L^4 / 8EI + tip load P L^3 / 3EI = 0.0368 + 0.0100 m (span 1 m)
+    # Euler-Bernoulli: gravity q L^4 / 8EI + tip load P L^3 / 3EI = 0.0368 + 0.0100 m (span 1 m),
+    # 0.0384 m for the 0.95 m the clamp leaves (it holds the end face and 0.05 m of the sides)
     assert -0.05 < tip[2] < -0.035 and abs(tip[0]) < 1e-3 * abs(tip[2])
     assert result.solver.iterations > 0 and result.solver.residual <= 1e-8
     assert set(result.fields.cells) == {"displacement", "von_mises"}
     job = {**spec.model_dump(mode="json"), "method": {"kind": "dg", "degree": 2, "penalty": 10},
-           "grid": {"resolution": 8, "padding": 1}}
+           "grid": {"resolution": 16, "padding": 1}}
     dg = run(parse_job(job), ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))
     tip_dg = dg.fields.probes["displacement"][0]
-    # the same beam with k = 2 on an 8-cell grid: within 10% of the staggered 16-cell answer
+    # the same beam and clamp with k = 2 on a 16-cell grid: within 10% of the staggered 32-cell answer
+    # (measured 3.5%)
     assert abs(tip_dg[2] - tip[2]) < 0.1 * abs(tip[2])
-    assert dg.method == "dg" and dg.solver.residual < 1e-10
+    assert dg.method == "dg" and dg.solver.residual < 1e-9  # direct solve, measured 4.1e-10 on this grid
     assert dg.fields.surface["displacement"].shape == (len(dg.surface_vertices), 3)
     assert np.all(np.isfinite(dg.fields.surface["displacement"]))
-
-
-def test_a_clamp_thinner_than_the_samples_is_named_with_the_net_force():
-    from engine.solvers.rigid import UnbalancedLoadError
-
-    spec = cantilever_spec(resolution=8)  # the clamp slab x <= 0.05 holds only u_x samples at h = 1/8: y, z and the twist stay free
-    with pytest.raises(UnbalancedLoadError, match=r"leave 3 rigid-body mode\(s\).*net force \[0\.0, 0\.0, -4"):
-        run(spec, ROOT / "examples" / "cantilever.stl", cache=GeometryCache(None))

@@ -219,15 +219,17 @@ def test_cg_below_the_f64_floor_names_the_conditioning_not_the_precision():
 def test_nu_04999_cantilever_meets_rtol_with_the_true_residual():
     """The stress suite's cantilever at nu = 0.4999 (h = W / 6, f64): the recursive residual reaches
     1e-8 after 1051 iterations with the true one at 2.5e-8 (the solve used to return that); one
-    restart brings the true residual to 9.1e-9 (1213 iterations in all; measured while the load
-    sampling was being reworked, which moves these counts by 10-20%)."""
+    restart brings the true residual to 9.1e-9 (1213 iterations in all, with the clamp holding
+    whole samples; 4187 with the weak hold on its surface patch)."""
     from benchmarks import stress as S
 
     spec_m = S.method_spec("staggered", S.QUICK)
     h, bar = S.cell_size("staggered", S.QUICK), S.cantilever()
     s = S.solve(S.cantilever_job(spec_m, h, bar, nu=0.4999), bar.mesh(), condition=False)
     (stats,) = s.stats
-    assert stats.residual <= 1e-8 and stats.restarts >= 1 and stats.iterations < 1600
+    # the clamp's Nitsche penalty scales with lambda (2 lambda as nu -> 1/2): 4187 iterations since
+    # the clamp holds the surface (1213 when it held whole samples); multigrid at nu -> 1/2 is issue 21
+    assert stats.residual <= 1e-8 and stats.restarts >= 1 and stats.iterations < 5000
     assert not any("true relative residual" in w for w in s.warnings)
 
 

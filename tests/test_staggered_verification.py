@@ -73,27 +73,26 @@ def test_grid_aligned_bar_under_end_traction_is_exact(tmp_path, dim, support):
         geometry, mesh = {"mesh": "bar.stl"}, path
     else:
         geometry, mesh = {"polygon": [[[0, 0], [L, 0], [L, W], [0, W]]]}, None
-    big = [1.0] * dim
-    lo, hi = [-1.0] * dim, [2.0] * dim
     free = [None] * dim
-    # u_x = 0 selects exactly the u_x samples on the face x = 0 (u_y, u_z live at x = h/2)
+
+    def below(k: int) -> dict:  # the half-space x_k <= 0: the face x_k = 0 (other faces meet it in zero area)
+        return {"halfspace": {"point": [0.0] * dim, "normal": np.eye(dim)[k].tolist()}}
+
+    # u_x = 0 on the end face x = 0, held weakly (Nitsche) at its surface points
     boundaries = [
-        {"kind": "displacement", "name": "end", "region": {"box": [[-0.01 * h] + lo[1:], [0.01 * h] + big[1:]]},
-         "value": [0.0] + free[1:]},
+        {"kind": "displacement", "name": "end", "region": below(0), "value": [0.0] + free[1:]},
         # the half-space x >= L holds the end face only: side faces meet it in zero-area slivers
         {"kind": "traction", "name": "pull", "region": {"halfspace": {"point": [L] + [0.0] * (dim - 1),
                                                                       "normal": [-1.0] + [0.0] * (dim - 1)}},
          "value": [T] + [0.0] * (dim - 1)},
     ]
     if support == "rollers":
-        # u_k = 0 on the symmetry plane x_k = W/2: only the u_k samples lie on it (W / 2h integer)
+        # u_k = 0 on the side face x_k = 0 (a roller: the other components stay free)
+        c[1:] = 0.0
         for k in range(1, dim):
-            box_lo, box_hi = list(lo), list(hi)
-            box_lo[k], box_hi[k] = W / 2 - 0.01 * h, W / 2 + 0.01 * h
             value = list(free)
             value[k] = 0.0
-            boundaries.append({"kind": "displacement", "name": f"sym{k}", "region": {"box": [box_lo, box_hi]},
-                               "value": value})
+            boundaries.append({"kind": "displacement", "name": f"roller{k}", "region": below(k), "value": value})
     # free_sides: translations across the bar and the twist stay free; the loads do no work on
     # them, so the engine solves orthogonal to them -- the symmetric solution below.
     spec = _spec(dim, geometry, {"cell_size": h, "padding": 1},
@@ -155,40 +154,40 @@ def _square_body(tmp_path):
 
 
 @pytest.mark.parametrize("dim", [3, 2])
-def test_affine_displacement_on_the_surface_layer_is_reproduced_exactly_inside(tmp_path, rng, dim):
+def test_affine_displacement_held_on_the_whole_cut_surface_to_second_order(tmp_path, rng, dim):
+    """An affine displacement held (Nitsche) on the whole surface of a body the grid cuts. Full
+    cells annihilate affine fields, but the hold's flux is a surface quadrature of sigma n while
+    the cut cells' energy gives the divergence form's forces: they differ by O(h) on the cut rows,
+    so the field is reproduced to O(h^2) (not to round-off, as a hold of whole sample layers did).
+    Measured (error over |G| * extent): 3D res 16: full cells 1.26e-2 max (3.2 h^2), median of all
+    cells 2.1e-3 (0.55 h^2); 2D res 24: full cells 2.2e-3 (1.24 h^2); the largest, 9e-2, at cells
+    holding 0.2% material (their centre value averages extrapolated samples)."""
     geometry, mesh, depth, extent = (_sphere_body if dim == 3 else _square_body)(tmp_path)
     res = 16 if dim == 3 else 24
-    h = extent / res
     E, nu = 3.0e6, 0.27
     G = rng.normal(size=(dim, dim)) * 1e-3
     shift = rng.normal(size=dim) * 1e-3
-    # Every sample within 1.5 h of the surface is prescribed: the control volumes touching a
-    # free sample then lie in full material (they reach at most sqrt(1 + 1/4 + 1/4) h from it),
-    # so its row sees no cut fraction and annihilates affine fields.
-    layer = 1.5 * h
     spec = _spec(dim, geometry, {"resolution": res, "padding": 1}, {"youngs_modulus": E, "poisson_ratio": nu},
                  [{"kind": "displacement", "name": "skin", "region": {"all": True}, "value": [0.0] * dim}],
                  fields=("displacement", "stress"))
-    functions = Functions(displacement={"skin": lambda x: x @ G.T + shift},
-                          regions={"skin": lambda x: depth(x) < layer})
+    functions = Functions(displacement={"skin": lambda x: x @ G.T + shift})
     result = _run(spec, mesh, functions)
-    assert result.solver.residual <= 1e-12
+    assert result.solver.residual <= 1e-10
     solid, x = _cell_centres(result)
-    interior = depth(x) > layer + h
-    assert interior.sum() >= (300 if dim == 3 else 150)  # a real interior, not just the prescribed layer
-    assert np.any(result.volume_fraction[solid] < 1)  # and cut cells
-
+    fraction = result.volume_fraction[solid]
+    assert np.any(fraction < 1)  # cut cells
     u = result.fields.cells["displacement"][solid]
-    scale = np.abs(G).max()
-    # the cell value is the mean of its two faces and the normal strain their difference, so
-    # together they pin every normal sample; the edges' shear strains pin the rest
-    assert np.abs(u - (x @ G.T + shift)).max() <= 1e-9 * scale
+    err = np.linalg.norm(u - (x @ G.T + shift), axis=1) / (np.abs(G).max() * extent)
+    h_rel = 1.0 / res
+    assert err[fraction == 1].max() <= 4.0 * h_rel**2, err[fraction == 1].max()  # 3D 3.2, 2D 1.24 h^2
+    assert np.median(err) <= 0.7 * h_rel**2, np.median(err)
+    # constant strain in the full cells away from the surface
     lam, mu = lame_parameters(E, nu)
     eps = 0.5 * (G + G.T)
     want = _voigt(lam * np.trace(eps) * np.eye(dim) + 2 * mu * eps)
-    sigma = result.fields.cells["stress"][solid]
-    # constant strain everywhere (the layer is prescribed affine too), cut cells included
-    assert np.abs(sigma - want).max() <= 1e-8 * np.abs(want).max()
+    inner = (fraction == 1) & (depth(x) > 2 * extent / res)
+    sigma = result.fields.cells["stress"][solid][inner]
+    assert np.abs(sigma - want).max() <= 0.1 * np.abs(want).max(), np.abs(sigma - want).max() / np.abs(want).max()
 
 
 # --- 3. Lame thick sphere ----------------------------------------------------------------------
@@ -281,10 +280,9 @@ def _bar_dynamics(tmp_path, dt, steps, method=None):
         trimesh.creation.box(bounds=[[0, 0, 0], [L, W, W]]).export(path)
     spec = _spec(3, {"mesh": "rod.stl"}, {"cell_size": h, "padding": 1},
                  {"youngs_modulus": E, "poisson_ratio": 0.0, "density": rho},
-                 [  # staggered: the slab x <= 0.6 h holds the u_x samples at x = 0 and u_y, u_z at x = h/2;
-                     # DG: the end face only (clamped sides near it would shear the section)
+                 [  # the end face only (clamped sides near it would shear the section)
                      {"kind": "displacement", "name": "clamp", "value": [0, 0, 0],
-                      "region": {"box": [[-1, -1, -1], [0.6 * h if method is None else 1e-9, 1, 1]]}},
+                      "region": {"box": [[-1, -1, -1], [1e-9, 1, 1]]}},
                      {"kind": "traction", "name": "pull",
                       "region": {"halfspace": {"point": [L, 0, 0], "normal": [-1, 0, 0]}}, "value": [traction, 0, 0]},
                  ],

@@ -32,6 +32,7 @@ from . import assembly, warping
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .embedding import SurfaceEmbedding
 from .integrals import Basis, make_basis, surface_points
+from .location import locate, owners
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
@@ -481,73 +482,11 @@ class DGElasticity:
 
     def locate(self, points: np.ndarray) -> np.ndarray:
         """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
-        from ..geometry.winding import inside
-
-        points = np.asarray(points, dtype=float)
-        out = np.full(len(points), -1, dtype=np.int64)
-        grid, cut = self.elements.grid, self.cut
-        # the winding number costs O(points x triangles): only points in cut cells need it. A point
-        # strictly inside a full cell is in that cell's element, one in a cell without pieces is outside
-        rel = (points - np.asarray(grid.origin)) / grid.spacing
-        cell = np.floor(rel).astype(np.int64)
-        interior = np.all((rel - cell > 1e-9) & (rel - cell < 1 - 1e-9), axis=1)
-        interior &= np.all((cell >= 0) & (cell < np.asarray(grid.shape)), axis=1)
-        lin = np.full(len(points), -1, dtype=np.int64)
-        lin[interior] = grid.linear_index(cell[interior])
-        full_lin = grid.linear_index(cut.piece_cell[cut.full])
-        all_lin = np.unique(grid.linear_index(cut.piece_cell))
-        in_full = interior & np.isin(lin, full_lin)
-        empty = interior & ~np.isin(lin, all_lin)
-        out[in_full] = self.elements.piece_element[np.nonzero(cut.full)[0][_positions(full_lin, lin[in_full])]]
-        rest = ~in_full & ~empty
-        if np.any(rest):
-            ok = np.zeros(len(points), dtype=bool)
-            ok[rest] = inside(self.surface.vertices, self.surface.faces, points[rest])
-            if np.any(ok):
-                out[ok] = self.owners(points[ok])
-        return out
+        return locate(self.elements, self.cut, self.surface, points)
 
     def owners(self, points: np.ndarray) -> np.ndarray:
-        """Element [N] of points known to lie in the solid or on its surface, -1 where no cell around
-        holds a piece. A point on a cell face looks in the cells on both sides. Among several pieces the
-        one owning the nearest surface triangle wins (exact: the segment from a point to another piece
-        of its cell leaves the solid through the point's own piece's surface)."""
-        grid, cut = self.elements.grid, self.cut
-        h = grid.spacing
-        out = np.full(len(points), -1, dtype=np.int64)
-        shape = np.asarray(grid.shape)
-        lin_pieces = grid.linear_index(cut.piece_cell)
-        order = np.argsort(lin_pieces, kind="stable")
-        sorted_lin = lin_pieces[order]
-        tri_order = np.argsort(cut.boundary_piece, kind="stable")
-        tri_piece = cut.boundary_piece[tri_order]
-        rel = (np.asarray(points) - np.asarray(grid.origin)) / h
-        tol = 1e-9
-        for q, r in enumerate(rel):
-            lo, hi = np.floor(r - tol).astype(np.int64), np.floor(r + tol).astype(np.int64)
-            cand = []
-            for c in {tuple(np.where(np.array(bits, bool), hi, lo)) for bits in np.ndindex(2, 2, 2)}:
-                if np.all(np.array(c) >= 0) and np.all(np.array(c) < shape):
-                    k = int(np.ravel_multi_index(c, tuple(shape)))
-                    i, j = np.searchsorted(sorted_lin, k), np.searchsorted(sorted_lin, k, side="right")
-                    cand.extend(order[i:j].tolist())
-            if not cand:
-                continue
-            if len(cand) == 1:
-                out[q] = self.elements.piece_element[cand[0]]
-                continue
-            best, best_d = cand[0], np.inf
-            for piece in cand:
-                i, j = np.searchsorted(tri_piece, piece), np.searchsorted(tri_piece, piece, side="right")
-                if j > i:
-                    d = _point_triangle_distance(points[q], cut.boundary_triangles[tri_order[i:j]]).min()
-                    if d < best_d:
-                        best, best_d = piece, d
-                elif best_d == np.inf:
-                    best = piece  # an interior (full) piece: the point is inside it unless a surface is nearer
-                    best_d = np.inf
-            out[q] = self.elements.piece_element[best]
-        return out
+        """Element [N] of points known to lie in the solid or on its surface (``location.owners``)."""
+        return owners(self.elements, self.cut, points)
 
     def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
                time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
@@ -605,12 +544,6 @@ class DGElasticity:
         return self._embedding
 
 
-def _positions(keys: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Index [n] into keys [k] (distinct) of each value [n] (every value is a key)."""
-    order = np.argsort(keys)
-    return order[np.searchsorted(keys[order], values)]
-
-
 def _rigid_fields(x: np.ndarray) -> np.ndarray:
     """Rigid modes [Q, 6, 3] at points x [Q, 3] (relative to a centre): 3 translations, then rotations
     in the planes (x, y), (x, z), (y, z)."""
@@ -621,33 +554,3 @@ def _rigid_fields(x: np.ndarray) -> np.ndarray:
     r[:, 4, 0], r[:, 4, 2] = -x[:, 2], x[:, 0]
     r[:, 5, 1], r[:, 5, 2] = -x[:, 2], x[:, 1]
     return r
-
-
-def _point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Distances [T] from point p [3] to triangles [T, 3, 3] (Ericson's closest-point regions)."""
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = np.einsum("td,td->t", ab, ap), np.einsum("td,td->t", ac, ap)
-    bp, cp = p - b, p - c
-    d3, d4 = np.einsum("td,td->t", ab, bp), np.einsum("td,td->t", ac, bp)
-    d5, d6 = np.einsum("td,td->t", ab, cp), np.einsum("td,td->t", ac, cp)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    denom = va + vb + vc
-    denom = np.where(np.abs(denom) > 1e-300, denom, 1e-300)
-    v, w = vb / denom, vc / denom
-    closest = a + ab * v[:, None] + ac * w[:, None]
-    # vertex and edge regions
-    r = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6)]
-    closest = np.where(r[0][:, None], a, closest)
-    closest = np.where(r[1][:, None], b, closest)
-    closest = np.where(r[2][:, None], c, closest)
-    on_ab = (d1 * d4 - d3 * d2 <= 0) & (d1 >= 0) & (d3 <= 0) & ~(r[0] | r[1] | r[2])
-    t_ab = d1 / np.where(d1 - d3 != 0, d1 - d3, 1)
-    closest = np.where(on_ab[:, None], a + ab * t_ab[:, None], closest)
-    on_ac = (d5 * d2 - d1 * d6 <= 0) & (d2 >= 0) & (d6 <= 0) & ~(r[0] | r[1] | r[2])
-    t_ac = d2 / np.where(d2 - d6 != 0, d2 - d6, 1)
-    closest = np.where(on_ac[:, None], a + ac * t_ac[:, None], closest)
-    on_bc = (d3 * d6 - d5 * d4 <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0) & ~(r[0] | r[1] | r[2])
-    t_bc = (d4 - d3) / np.where((d4 - d3) + (d5 - d6) != 0, (d4 - d3) + (d5 - d6), 1)
-    closest = np.where(on_bc[:, None], b + (c - b) * t_bc[:, None], closest)
-    return np.linalg.norm(closest - p, axis=1)

@@ -42,3 +42,33 @@ class Surface:
         if self.dim == 3:
             return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
         return float((p[:, 0, 0] * p[:, 1, 1] - p[:, 1, 0] * p[:, 0, 1]).sum() / 2.0)
+
+
+def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Distances [T] from point p [3] to triangles [T, 3, 3] (Ericson's closest-point regions)."""
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("td,td->t", ab, ap), np.einsum("td,td->t", ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4 = np.einsum("td,td->t", ab, bp), np.einsum("td,td->t", ac, bp)
+    d5, d6 = np.einsum("td,td->t", ab, cp), np.einsum("td,td->t", ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    denom = va + vb + vc
+    denom = np.where(np.abs(denom) > 1e-300, denom, 1e-300)
+    v, w = vb / denom, vc / denom
+    closest = a + ab * v[:, None] + ac * w[:, None]
+    # vertex and edge regions
+    r = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6)]
+    closest = np.where(r[0][:, None], a, closest)
+    closest = np.where(r[1][:, None], b, closest)
+    closest = np.where(r[2][:, None], c, closest)
+    on_ab = (d1 * d4 - d3 * d2 <= 0) & (d1 >= 0) & (d3 <= 0) & ~(r[0] | r[1] | r[2])
+    t_ab = d1 / np.where(d1 - d3 != 0, d1 - d3, 1)
+    closest = np.where(on_ab[:, None], a + ab * t_ab[:, None], closest)
+    on_ac = (d5 * d2 - d1 * d6 <= 0) & (d2 >= 0) & (d6 <= 0) & ~(r[0] | r[1] | r[2])
+    t_ac = d2 / np.where(d2 - d6 != 0, d2 - d6, 1)
+    closest = np.where(on_ac[:, None], a + ac * t_ac[:, None], closest)
+    on_bc = (d3 * d6 - d5 * d4 <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0) & ~(r[0] | r[1] | r[2])
+    t_bc = (d4 - d3) / np.where((d4 - d3) + (d5 - d6) != 0, (d4 - d3) + (d5 - d6), 1)
+    closest = np.where(on_bc[:, None], b + (c - b) * t_bc[:, None], closest)
+    return np.linalg.norm(closest - p, axis=1)

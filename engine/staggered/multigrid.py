@@ -73,7 +73,7 @@ class Multigrid:
             if cut_share(coarse) > MAX_CUT_SHARE:
                 break
             if fine.hold is not None:  # the displacement boundaries, rediscretised on this level
-                coarse.set_surface(make_surface_operator(coarse, fine.hold), fine.hold)
+                coarse.set_surface(make_surface_operator(coarse, fine.hold.quadrature(2 * coarse.spacing)), fine.hold)
             self.levels.append(coarse)
         # coarse tiles around each fine tile's parent (prolongation), fine tiles around each
         # coarse tile's children (restriction)

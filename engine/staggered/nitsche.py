@@ -6,8 +6,9 @@ prescribed components P_q, values g_q),
 
     - sum_q w_q (sigma_h(u) n_q) . P_q (u_h(x_q) - g_q) + 1/2 sum_q w_q gamma_q |P_q (u_h(x_q) - g_q)|^2
 
-where u_h is the interpolation that every output reads (multilinear over the active samples,
-``sampling.interpolate``) and sigma_h the staggered stress of a *source cell* near x_q: normal
+where u_h is the multilinear interpolation of the samples that every output reads (ghost samples
+outside the material included, ``operator.make_fine_level``; any corner still inactive is dropped
+and the rest renormalised) and sigma_h the staggered stress of a *source cell* near x_q: normal
 strains from the cell's faces, shear strains the edge-fraction-weighted mean of its four edges
 per pair (the strains the energy weighs). Its Hessian S adds to the operator, its gradient at
 u = 0 to the loads: symmetric, consistent (an exact solution leaves the first term zero), and
@@ -15,8 +16,8 @@ positive definite with the penalty below.
 
 Coercivity. A cell s with fill m_s (the smaller of its cell fraction and, per axis pair, a quarter
 of its four edge fractions) owns at least m_s h^d eps_s : C : eps_s of the energy a(v, v) (cell
-terms wholly, a quarter of each edge), and |sigma n|^2 <= Lambda eps : C eps with
-Lambda = 2 mu + d max(lambda, 0). With A_s the patch area whose flux s carries, Young's inequality
+terms wholly, a quarter of each edge), and |sigma n|^2 <= Lambda eps : C eps
+(:func:`traction_bound`). With A_s the patch area whose flux s carries, Young's inequality
 gives a_N(v, v) >= a(v, v) / 2 + sum_q w_q gamma_q / 2 |P v|^2 for
 gamma_s = COERCIVITY A_s Lambda / (h^d m_s). A cut cell holding a sliver would need a huge
 gamma_s, so a point's source is its own cell only when that cell's fill is at least TAU, else the
@@ -42,11 +43,12 @@ from ..boundary import Prescribed, select_patch, surface_quadrature
 from ..errors import BoundaryError
 from ..geometry.surface import Surface
 from .operator import Level, pairs
-from .sampling import _corner_weights, _corners, _unique_rows
+from .sampling import _corner_weights, _corners, _unique_rows, renormalised
 
 TAU = 0.5  # a point's source cell is its own when that cell's fill reaches this
-COERCIVITY = 4.0  # gamma_s over the smallest penalty that keeps a_N(v, v) >= a(v, v) / 2
-CHUNK = 200_000  # quadrature points per pass of the per-point products (bounds temporaries)
+COERCIVITY = 8.0  # gamma_s over the smallest penalty that keeps a_N(v, v) >= a(v, v) / 2 (twice it)
+MIN_FILL = 1e-3  # the fill a source cell is taken to have when no edge of a pair holds material
+CHUNK = 16_384  # quadrature points per pass of the per-point products (~10 MB temporaries each)
 
 
 @dataclass(frozen=True)
@@ -62,20 +64,35 @@ class HoldQuadrature:
     values: np.ndarray
 
 
-def hold_quadrature(prescribed: list[Prescribed], surface: Surface, spacing: float) -> HoldQuadrature | None:
-    """The quadrature of the displacement boundaries' patches (None when there are none); a
-    boundary whose region holds no surface is an error naming it."""
+@dataclass(frozen=True)
+class HoldPatches:
+    """The displacement boundaries' patches (pieces [M_k, d, d] per boundary), from which each
+    multigrid level takes a quadrature fitted to its own spacing (:meth:`quadrature`): a coarse
+    level's preconditioning operator needs no fine quadrature (4x fewer points per level)."""
+
+    prescribed: tuple[Prescribed, ...]
+    pieces: tuple[np.ndarray, ...]
+
+    def quadrature(self, spacing: float) -> HoldQuadrature:
+        """The rule of :func:`engine.boundary.surface_quadrature` at ``spacing`` [m] on every patch."""
+        parts = []
+        for bc, pieces in zip(self.prescribed, self.pieces):
+            d = pieces.shape[-1]
+            x, w, n = surface_quadrature(pieces, spacing)
+            mask = np.broadcast_to(bc.mask(d).astype(float), (len(w), d))
+            parts.append((x, w, n, mask, bc.values(x)))
+        return HoldQuadrature(*(np.concatenate(p) for p in zip(*parts)))
+
+
+def hold_patches(prescribed: list[Prescribed], surface: Surface) -> HoldPatches | None:
+    """The patches of the displacement boundaries (None when there are none); a boundary whose
+    region holds no surface is an error naming it."""
     if not prescribed:
         return None
     d = surface.dim
     facets = surface.vertices[surface.faces]
-    parts = []
-    for bc in prescribed:
-        pieces, _ = select_patch(bc.region, facets, bc.name)
-        x, w, n = surface_quadrature(pieces.reshape(-1, d, d), spacing)
-        mask = np.broadcast_to(bc.mask(d).astype(float), (len(w), d))
-        parts.append((x, w, n, mask, bc.values(x)))
-    return HoldQuadrature(*(np.concatenate(p) for p in zip(*parts)))
+    pieces = tuple(select_patch(bc.region, facets, bc.name)[0].reshape(-1, d, d) for bc in prescribed)
+    return HoldPatches(tuple(prescribed), pieces)
 
 
 @dataclass
@@ -108,7 +125,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     origin = np.asarray(level.origin, dtype=float)
     nv = d + len(pairs(d))
     lam, mu = level.lam, level.mu
-    big = 2.0 * mu + d * max(lam, 0.0)  # Lambda: |sigma n|^2 <= Lambda eps : C eps
+    big = traction_bound(lam, mu, d)
     x, w = quad.points, quad.weights
     src, sources, fill = _sources(level, np.floor((x - origin) / h).astype(np.int64))
     area = np.bincount(src, weights=w, minlength=len(sources))
@@ -139,15 +156,14 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
         near = (cells[:, None, :] + corners[None]).reshape(-1, d)
         near_pos = lay.positions(near)
         act = (near_pos >= 0) & level.active[a, np.maximum(near_pos, 0)]
-        phi = np.where(act.reshape(len(cells), k)[cell_of], phi, 0.0)
-        total = phi.sum(axis=1)
-        if np.any(total == 0):
-            bad = x[on][total == 0]
+        act = act.reshape(len(cells), k)[cell_of]
+        if np.any(~act.any(axis=1)):
+            bad = x[on][~act.any(axis=1)]
             raise BoundaryError(
                 f"boundaries: {len(bad)} surface points of a displacement patch (near {np.round(bad[0], 6).tolist()} m) "
                 "have no displacement sample in the material the grid resolves; refine the grid"
             )
-        phi /= total[:, None]
+        phi = renormalised(phi, act)
         sample_key = a * size + near_pos  # [cells * 2^d]
         # penalty mass: w gamma phi_I phi_J summed per (cell, I, J) slot
         slot_mass = np.zeros(len(cells) * k * k)
@@ -205,6 +221,15 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     return SurfaceOperator(comp, pos, mass, flux, stress, rhs)
 
 
+def traction_bound(lam: float, mu: float, d: int) -> float:
+    """Lambda [Pa] with |sigma n|^2 <= Lambda eps : C eps for unit n: the largest eigenvalue of C
+    (2 mu + d lambda, or 2 mu when lambda < 0), or, from |sigma n| <= 2 mu |eps| + |lambda tr eps|,
+    max(4 mu, 2 lambda) when that is smaller (nu > 1/(2 + d) in 3D: 1.5x smaller as nu -> 1/2)."""
+    if lam < 0:
+        return 2.0 * mu
+    return min(2.0 * mu + d * lam, max(4.0 * mu, 2.0 * lam))
+
+
 def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Source cell of each point given its cell index [Q, d]: (source number [Q], source cell
     indices [S, d], their fills [S] > 0)."""
@@ -214,6 +239,10 @@ def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     cand = cells[:, None, :] + offsets[None]
     fill = cell_fill(level, cand.reshape(-1, d)).reshape(len(cells), -1)
     if np.any(fill.max(axis=1) <= 0):
+        # material thinner than a cell with no edge holding it (a thin wall): take the cells' own
+        # fractions; such walls stop the setup with the thin-feature error that names them
+        fill = np.where(fill.max(axis=1, keepdims=True) > 0, fill, _cell_fraction(level, cand.reshape(-1, d)).reshape(fill.shape))
+    if np.any(fill.max(axis=1) <= 0):
         raise BoundaryError("boundaries: a displacement patch lies where the grid resolves no material around it; "
                             "refine the grid")
     # any cell filled to TAU beats every other; among those the nearest, then the fuller
@@ -221,7 +250,14 @@ def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     score = np.where(fill >= TAU, 10.0 - distance[None, :] + 0.1 * fill, fill)
     chosen = cand[np.arange(len(cells)), score.argmax(axis=1)]
     sources, source_of = _unique_rows(chosen)
-    return source_of[cell_of], sources, cell_fill(level, sources)
+    own = cell_fill(level, sources)
+    return source_of[cell_of], sources, np.where(own > 0, own, np.maximum(_cell_fraction(level, sources), MIN_FILL))
+
+
+def _cell_fraction(level: Level, cell: np.ndarray) -> np.ndarray:
+    """Cell fractions [N] of cells [N, d] (0 outside the kept tiles)."""
+    pos = level.layout.positions(cell)
+    return np.where(pos >= 0, level.vc_host[np.maximum(pos, 0)], 0.0)
 
 
 def cell_fill(level: Level, cell: np.ndarray) -> np.ndarray:
@@ -268,7 +304,8 @@ def _stress_rows(level: Level, cells: np.ndarray, nv: int) -> tuple[np.ndarray, 
         edges = [cells + i * eye[a] + j * eye[b] for i, j in itertools.product((0, 1), repeat=2)]
         weight = np.stack([np.where((p := lay.positions(e)) >= 0, level.ve_host[q, np.maximum(p, 0)], 0.0)
                            for e in edges], axis=1)
-        weight /= weight.sum(axis=1, keepdims=True)
+        total = weight.sum(axis=1, keepdims=True)
+        weight /= np.where(total > 0, total, 1.0)  # no edge of this pair (a thin wall): no shear stress
         for e, wt in zip(edges, weight.T):
             c = 2.0 * mu * 0.5 / h * wt  # eps_e = (u_a(E) - u_a(E - e_b) + u_b(E) - u_b(E - e_a)) / (2 h)
             row = s * nv + d + q

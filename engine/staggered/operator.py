@@ -111,7 +111,7 @@ class Level:
         self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
         self.surface = None  # the Nitsche terms of displacement boundaries (nitsche.SurfaceOperator)
-        self.hold = None  # their quadrature (nitsche.HoldQuadrature), for the coarser levels
+        self.hold = None  # their patches (nitsche.HoldPatches), for the coarser levels
         self.set_free(self.active)
 
     @property
@@ -137,7 +137,7 @@ class Level:
 
     def set_surface(self, surface, hold) -> None:
         """Add the surface terms ``surface`` (a ``nitsche.SurfaceOperator`` of this level, from the
-        quadrature ``hold``) to A: S x = mass xs - [flux, stress^T] [stress xs; flux^T xs] on its
+        patches ``hold``) to A: S x = mass xs - [flux, stress^T] [stress xs; flux^T xs] on its
         DOFs xs, two CSR passes over z = [xs; stress xs; flux^T xs]."""
         self.surface, self.hold = surface, hold
         self._dinv = None
@@ -475,10 +475,9 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
                     ghosts: list[np.ndarray] | None = None) -> Level:
     """The finest level: the kept tiles are those touching material, with exact fractions.
     ``dtype``: its device float type (default the solve precision). ``ghosts``: per component a
-    [k, d] samples outside the material that surface points interpolate from
+    [k, d] samples outside the material that boundaries' surface points interpolate from
     (``sampling.stencil_samples``); those an edge holding material ties to the body join the
-    unknowns (:func:`_ghost_faces`), so boundary conditions and loads read a linear
-    interpolation there, not the nearest inner sample."""
+    unknowns (:func:`_ghost_faces`)."""
     grid = fractions.grid
     d = grid.dim
     box = tuple(n + 1 for n in grid.shape)

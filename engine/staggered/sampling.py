@@ -120,10 +120,8 @@ def interpolate(grid: Grid, points: np.ndarray, lookup: Lookup) -> np.ndarray:
     for a in range(grid.dim):
         index, weights = stencil(grid, points, a)
         values, active = _read(grid, index, a, lookup)
-        weights = np.where(active, weights, 0.0)
-        total = weights.sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out[:, a] = (weights * np.where(active, values, 0.0)).sum(axis=1) / total
+        weights = renormalised(weights, active)
+        out[:, a] = np.where(active.any(axis=1), (weights * np.where(active, values, 0.0)).sum(axis=1), np.nan)
     return out
 
 
@@ -176,7 +174,7 @@ def surface_loads(
         load = weights * tractions[:, a]
         if active is not None:
             is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
-            phi = _renormalised(phi, is_active[cell_of], a, load, name)
+            phi = _restricted(phi, is_active[cell_of], a, load, name)
         slot = (cell_of[:, None] * k + np.arange(k)).ravel()
         keep = phi.ravel() > 0
         summed = np.bincount(slot[keep], weights=(load[:, None] * phi).ravel()[keep], minlength=len(cells) * k)
@@ -189,20 +187,26 @@ def surface_loads(
     return loads
 
 
-def _renormalised(phi: np.ndarray, is_active: np.ndarray, a: int, load: np.ndarray, name: str) -> np.ndarray:
+def renormalised(phi: np.ndarray, is_active: np.ndarray) -> np.ndarray:
     """Stencil weights phi [N, 2^d] over the active samples (``is_active`` [N, 2^d]) only, each row
-    renormalised to 1; a point with force ``load`` [N] [N] != 0 along axis ``a`` and no active
-    sample is an error naming ``name``."""
+    renormalised to 1 (rows without an active sample stay zero)."""
     phi = np.where(is_active, phi, 0.0)
-    total = phi.sum(axis=1)
-    lost = (total == 0) & (load != 0)
+    total = phi.sum(axis=1, keepdims=True)
+    return phi / np.where(total > 0, total, 1.0)
+
+
+def _restricted(phi: np.ndarray, is_active: np.ndarray, a: int, load: np.ndarray, name: str) -> np.ndarray:
+    """Stencil weights phi [N, 2^d] over the active samples (``is_active`` [N, 2^d]) only,
+    :func:`renormalised`; a point with force ``load`` [N] [N] != 0 along axis ``a`` and no active
+    sample is an error naming ``name``."""
+    lost = ~is_active.any(axis=1) & (load != 0)
     if lost.any():
         raise VoxelasticError(
             f"{name}: {int(lost.sum())} surface quadrature points carrying "
             f"{np.abs(load[lost]).sum():.6g} N of force along axis {a} have no active displacement "
             "sample nearby; the surface lies outside the material the grid resolves"
         )
-    return phi / np.where(total > 0, total, 1.0)[:, None]
+    return renormalised(phi, is_active)
 
 
 def _balanced(grid: Grid, load: np.ndarray, a: int, spread: tuple, summed: tuple, active: Active,
