@@ -46,6 +46,13 @@ class SphereRegion(SpecModel):
     sphere: Sphere
 
 
+def _nonzero(vector: tuple[float, ...], name: str) -> tuple[float, ...]:
+    """Validator: a direction must have a length (error type zero_<name>)."""
+    if math.hypot(*vector) == 0:
+        raise custom_error(f"zero_{name}", f"{name} must be non-zero")
+    return vector
+
+
 class Halfspace(SpecModel):
     """Half-space (x - point) . normal <= 0: the normal points out of the region.
 
@@ -55,12 +62,7 @@ class Halfspace(SpecModel):
     point: Vector = Field(description="A point on the bounding plane [m].")
     normal: Vector = Field(description="Outward normal of the region (non-zero, need not be unit).")
 
-    @field_validator("normal")
-    @classmethod
-    def _nonzero(cls, normal: tuple[float, ...]) -> tuple[float, ...]:
-        if math.hypot(*normal) == 0:
-            raise custom_error("zero_normal", "normal must be non-zero")
-        return normal
+    _nonzero = field_validator("normal")(lambda v: _nonzero(v, "normal"))
 
 
 class HalfspaceRegion(SpecModel):
@@ -76,12 +78,7 @@ class Facing(SpecModel):
         gt=0, le=180, description="Largest angle [degrees] between a kept facet's outward normal and direction."
     )
 
-    @field_validator("direction")
-    @classmethod
-    def _nonzero(cls, direction: tuple[float, ...]) -> tuple[float, ...]:
-        if math.hypot(*direction) == 0:
-            raise custom_error("zero_direction", "direction must be non-zero")
-        return direction
+    _nonzero = field_validator("direction")(lambda v: _nonzero(v, "direction"))
 
 
 class AllRegion(SpecModel):

@@ -556,3 +556,20 @@ def test_json_document_errors() -> None:
     text = json.dumps(MINIMAL).replace('"youngs_modulus": 2000000.0', '"youngs_modulus": NaN')
     assert _errors(text) == ["material.youngs_modulus: must be a finite number, got nan"]
     assert _errors(b"\x80{}")[0].startswith("(json): cannot decode the text as utf-8")
+
+
+def test_facing_on_any_boundary_round_trips_and_names_bad_values() -> None:
+    facing = {"direction": [1, 0, 0], "max_angle_deg": 30}
+    spec = _edit(DESIGN_EXAMPLE, "boundaries.3.facing", facing)
+    job = parse_job(spec)
+    assert job.boundaries[3].facing.direction == (1.0, 0.0, 0.0) and job.boundaries[3].facing.max_angle_deg == 30
+    assert parse_job(job.to_json()) == job
+    import jsonschema
+
+    jsonschema.validate(json.loads(job.to_json()), json.loads(SCHEMA_PATH.read_text()))
+    assert _errors(_edit(spec, "boundaries.3.facing.max_angle_deg", 0)) == [
+        "boundaries.3.facing.max_angle_deg: Input should be greater than 0"]
+    assert _errors(_edit(spec, "boundaries.3.facing.direction", [0, 0, 0])) == [
+        "boundaries.3.facing.direction: direction must be non-zero"]
+    assert _errors(_edit(spec, "boundaries.3.facing.direction", [1, 0])) == [
+        "boundaries.3.facing.direction: expected 3 components (dimension 3), got 2"]

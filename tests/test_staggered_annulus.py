@@ -2,15 +2,15 @@
 
 Both problems hold the exact displacement on the annulus' circles (Nitsche on the surface patch,
 engine/staggered/nitsche.py); the thesis prescribed every sample outside the annulus instead.
-Measured (this machine), cell-centre errors at N = 32, 64, 128, 256:
+Measured (this machine), cell-centre errors at N = 32, 64, 128, 256 (docs/benchmarks.md):
 
-- all-Dirichlet: L1 7.12e-3, 2.00e-3, 5.78e-4, 1.73e-4 (order 1.79; the thesis' Table 5.2:
-  2.26e-2, 5.15e-3, 1.22e-3, 2.97e-4), L_inf 1.15e-2, 7.00e-3, 3.78e-3, 1.79e-3 (order 0.9: the
+- all-Dirichlet: L1 7.62e-3, 2.03e-3, 5.80e-4, 1.68e-4 (order 1.85; the thesis' Table 5.2:
+  2.26e-2, 5.15e-3, 1.22e-3, 2.97e-4), L_inf 1.39e-2, 6.90e-3, 2.95e-3, 1.75e-3 (order 1.0: the
   largest errors sit in cut cells at the held circles, where the hold's flux, a surface quadrature
   of sigma n, and the cut cells' energy disagree at O(h); the thesis: 1.92e-2 ... 3.01e-4).
-- traction outer (divergence form), held inner: L1 9.69e-3, 3.03e-3, 7.91e-4, 2.09e-4 (order
-  1.85), L_inf 1.06e-2, 7.00e-3, 3.08e-3, 1.79e-3 (the held inner circle, as above); the
-  surface-quadrature traction: L1 order 1.5.
+- traction outer (divergence form), held inner: L1 1.02e-2, 3.03e-3, 8.63e-4, 2.26e-4 (order
+  1.83), L_inf 1.11e-2 ... 1.63e-3 (the held inner circle, as above); the surface-quadrature
+  traction: L1 order 1.57.
 """
 
 import numpy as np
