@@ -17,8 +17,6 @@ from .elements import Elements
 
 def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarray) -> np.ndarray:
     """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
-    from ..geometry.winding import inside
-
     points = np.asarray(points, dtype=float)
     out = np.full(len(points), -1, dtype=np.int64)
     grid = elements.grid

@@ -6,9 +6,9 @@ prescribed components P_q, values g_q),
 
     - sum_q w_q (sigma_h(u) n_q) . P_q (u_h(x_q) - g_q) + 1/2 sum_q w_q gamma_q |P_q (u_h(x_q) - g_q)|^2
 
-where u_h is the multilinear interpolation of the samples that every output reads (ghost samples
-outside the material included, ``operator.make_fine_level``; any corner still inactive is dropped
-and the rest renormalised) and sigma_h the staggered stress of a *source cell* near x_q: normal
+where u_h is the multilinear interpolation of the samples that every output reads (in 2D with the
+ghost samples outside the material, ``operator.make_fine_level``; a corner that is not an unknown
+is dropped and the rest renormalised) and sigma_h the staggered stress of a *source cell* near x_q: normal
 strains from the cell's faces, shear strains the edge-fraction-weighted mean of its four edges
 per pair (the strains the energy weighs). Its Hessian S adds to the operator, its gradient at
 u = 0 to the loads: symmetric, consistent (an exact solution leaves the first term zero), and
@@ -28,7 +28,7 @@ The operator is stored factored, S = mass - F Sig - (F Sig)^T on the DOFs it tou
 numbering): ``stress`` Sig [m, n] maps samples to the source cells' Voigt stresses, ``flux`` F
 [n, m] the stresses to forces (sum_q w_q phi_I(x_q) P_q n_q), ``mass`` [n, n] the penalty; the
 assembled product would hold ~8x more entries. Every multigrid level gets its own S from the
-same quadrature (rediscretised, like the volume terms).
+same patches, with a quadrature fitted to its spacing (rediscretised, like the volume terms).
 """
 
 from __future__ import annotations
@@ -132,7 +132,6 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     gamma = (COERCIVITY * big / h**d) * area / fill  # [sources]
     gw = w * gamma[src]  # w_q gamma_q
     size = level.size
-    keys, entries = [], []  # (row key, col key or column, value) triples per block
 
     # stress functional Sig: rows s * nv + v (Voigt: normals, then pairs), columns sample keys
     s_rows, s_keys, s_vals = _stress_rows(level, sources, nv)
