@@ -1,10 +1,11 @@
 """The staggered-grid method as a whole: fractions + material + boundary conditions -> solves -> fields.
 
 ``StaggeredElasticity`` sequences the pieces: the fine ``Level`` (tiles touching material, exact
-fractions), prescribed DOFs from displacement regions, the consistent load vector (body force
+fractions), the displacement boundaries held on their surface patches (Nitsche terms on every
+level, ``nitsche.py``), the consistent load vector (body force
 weighted by face fractions, surface tractions by quadrature on the mesh triangles; on a body that
 no displacement boundary holds, with the surface loads' exact net moment, so that loads balanced on
-the surface stay balanced), rigid-mode checks for bodies the prescribed DOFs leave free, the
+the surface stay balanced), rigid-mode checks for bodies the holds leave free, the
 multigrid-preconditioned CG solve and the fields at cell centres, probes and surface vertices.
 ``engine.analysis`` drives it in time.
 """
@@ -73,12 +74,10 @@ class StaggeredElasticity:
                                          traction=load.traction, pressure=load.pressure, stress=load.stress)
             for load in self.surface_loads if load.form != "divergence"
         }
-        # 2D: the samples that boundaries' surface points interpolate from join the unknowns where an
-        # edge ties them (ghosts, see make_fine_level): the annulus held on both circles converges
-        # with them (L1 7.1e-3 ... 5.2e-4 at N = 32 ... 128) and stalls at 1.9e-2 L_inf without.
-        # 3D: none. On the clamped thick sphere they changed no error but cost multigrid (258 CG
-        # iterations at h = 1/40 with every ghost, 19 without); at nu = 0.4999 CG stagnated; on
-        # loads they gave the massless ghosts an instant response in dynamics
+        # Ghost samples (make_fine_level) for the points where boundaries act, in 2D only: the annulus
+        # held on its circles needs them to converge; in 3D they changed no error on the clamped
+        # sphere but cost multigrid its convergence and gave dynamics an instant response (figures:
+        # docs/design-notes.md, "Boundaries on the surface patch")
         acting = [pts for pts, _, _ in self._load_points.values()] + ([self.hold.points] if self.hold else [])
         ghosts = sampling.stencil_samples(grid, np.concatenate(acting)) if acting and self.dim == 2 else None
         self.level = level = make_fine_level(self.fractions, lam, mu, ghosts=ghosts)
