@@ -212,7 +212,10 @@ class Functions:
     traction: dict[str, Callable] = field(default_factory=dict)
     stress: dict[str, Callable] = field(default_factory=dict)
     regions: dict[str, Callable] = field(default_factory=dict)
-    stress_form: str = "quadrature"  # how a stress field becomes loads: "quadrature" or "divergence"
+    # how a stress field becomes loads: "divergence" (thesis eq. 4.16, the operator's own weights) or
+    # "quadrature" (sigma n on the surface); the divergence form converges faster on the annulus and
+    # the ball (docs/benchmarks.md, "Boundaries on the surface patch")
+    stress_form: str = "divergence"
     pressure_form: str = "divergence"  # how a pressure becomes loads (sigma = -p I in the divergence form)
 
 
