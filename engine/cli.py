@@ -43,8 +43,8 @@ def _read_spec(path: str):
 def _output_problem(path: str) -> str | None:
     """Why a result cannot be written at ``path`` (None if it can), found before any work."""
     p = Path(path)
-    if p.suffix == ".xdmf":
-        return f"{path}: the HDF5 result needs another suffix than .xdmf (e.g. .h5)"
+    if p.suffix in (".xdmf", ".vtkhdf"):
+        return f"{path}: the HDF5 result needs another suffix than {p.suffix} (e.g. .h5)"
     if p.is_dir():
         return f"cannot write the result to '{path}': it is a directory"
     parent = p.parent if str(p.parent) else Path(".")
@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--padding", type=int, default=1, help="empty cells on every side (default 1)")
     p.add_argument("--dimension", type=int, choices=(2, 3), default=3)
     p.add_argument("--scale", type=float, default=1.0, help="factor applied to the coordinates")
-    p.add_argument("-o", "--output", required=True, help="result file (.h5); the .xdmf sidecar goes beside it")
+    p.add_argument("-o", "--output", required=True, help="result file (.h5); the viewer files (.xdmf, .solid.xdmf, .surface.xdmf, .vtkhdf) go beside it")
     p.set_defaults(func=cmd_voxelize)
 
     p = sub.add_parser("run", help="run a job spec; progress on stderr")

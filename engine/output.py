@@ -1,27 +1,9 @@
-"""Simulation results: the ``Result`` data classes and the HDF5 result file (contract).
+"""Simulation results: the ``Result`` data classes and the HDF5 result file.
 
-Layout (``d`` = 2 or 3; cell arrays are stored C-order as [nx, ny, (nz), ...])::
-
-    /                 attrs format="voxelastic-result", format_version, method, spec (JSON), version
-                      (+ time, only if the final state has one)
-    /x, /y, (/z)      cell-centre coordinates [m]; with /component [d] ("x", "y", ("z")) and
-                      /voigt [6 | 3] the HDF5 dimension scales of every cell array (netCDF/xarray)
-    /grid             attrs origin [d] (m), spacing (m), shape [d]
-    /cells/volume_fraction          [nx, ny, (nz)] in [0, 1]
-    /fields/<name>                  [nx, ny, (nz), ...] at cell centres, NaN where empty
-    /probes/points [n, d]   /probes/<name> [n, ...]
-    /surface/vertices [m, d]  /surface/faces [k, d] (triangles / 2D segments)  /surface/<name> [m, ...]
-    /steps/NNNN       attrs time; sub-groups fields/, probes/, surface/ holding <name> datasets only
-    /solver           attrs iterations, residual, stage_times (JSON object, seconds), warnings [str]
-    /xdmf/nodes       [nx+1, ny+1, (nz+1), d] cell-corner coordinates [m], only for the XDMF sidecar
-
-Every dataset carries ``units`` ("m", "Pa", "1", ...) and ``location`` ("cell_center", "probe",
-"surface_vertex", "surface_face", "cell_corner"); multi-component datasets carry ``components``
-(vector: x, y, (z); Voigt: xx, yy, zz, yz, xz, xy in 3D, xx, yy, xy in 2D). Field names must be
-keys of ``FIELDS`` -- an unknown name is a ValueError, so every stored field has real units.
-
-Files are written atomically (temporary name beside the target, fsync, ``os.replace``) together
-with an XDMF sidecar ``<name>.xdmf`` (see ``engine.xdmf``) that ParaView/VTK open directly.
+The file's layout (the contract: groups, datasets, shapes, units, attributes) is documented in
+docs/result-format.md; ``validate_result`` enforces it before writing and ``read_result`` reads it
+back. Files are written atomically (temporary name beside the target, fsync, ``os.replace``)
+together with XDMF sidecars (``engine.xdmf``) that ParaView, PyVista, meshio and VTK open directly.
 """
 
 from __future__ import annotations
@@ -134,6 +116,20 @@ class Result:
     @property
     def dim(self) -> int:
         return self.grid.dim
+
+    def to_xarray(self):
+        """The result as an ``xarray.DataTree`` with named dimensions, coordinates and units
+        (``engine.convert.to_xarray``; needs xarray)."""
+        from .convert import to_xarray
+
+        return to_xarray(self)
+
+    def to_pyvista(self, step: int | None = None):
+        """The final state (or ``steps[step]``) as a ``pyvista.MultiBlock`` of the solid, the
+        refined surface and the probes (``engine.convert.to_pyvista``; needs PyVista)."""
+        from .convert import to_pyvista
+
+        return to_pyvista(self, step)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -375,48 +371,77 @@ def outside_probes_warning(result: Result, shown: int = 5) -> str | None:
 
 def estimate_result_bytes(shape: Sequence[int], fields: Sequence[str], *, levels: int = 1,
                           surface_vertices: int = 0, probes: int = 0) -> int:
-    """Size of the result file before compression [bytes]: what a job needs free on the disk.
+    """Size of the result files before compression [bytes]: what a job needs free on the disk.
 
     Every cell array is stored dense over the grid (``shape``): the volume fraction, the cell
     corners for XDMF, and each of ``fields`` per level (the final state, plus one per step of a
-    quasi-static or dynamic job: ``levels`` = steps + 1); surface and probe values per level.
-    gzip shrinks empty cells to almost nothing, so real files are smaller; an upper bound is what
-    a check of free space wants.
+    quasi-static or dynamic job: ``levels`` = steps + 1); surface and probe values per level. The
+    viewer files (``sidecar_paths``) hold the material cells again, at most every cell, twice (the
+    XDMF views and the VTKHDF file) with their corners, and the refined surface (at most
+    ``engine.views.MAX_REFINED_FACES`` facets). gzip shrinks empty cells to almost nothing, so real
+    files are smaller; an upper bound is what a check of free space wants.
     """
+    from .views import MAX_REFINED_FACES
+
     dim = len(shape)
     cells = int(np.prod(shape, dtype=np.int64))
     corners = int(np.prod([n + 1 for n in shape], dtype=np.int64))
     per_point = sum(max(1, len(components(name, dim))) for name in fields)
     per_level = (cells + surface_vertices + probes) * per_point
-    return 8 * (cells + corners * dim + 3 * surface_vertices + levels * per_level) + 64 * 1024
+    dense = cells + corners * dim + 3 * surface_vertices + levels * per_level
+    refined = MAX_REFINED_FACES if surface_vertices else 0
+    views = 2 * (corners * 3 + cells * (2**dim + dim + 1) + levels * (cells + corners) * (per_point + 1)) \
+        + refined * (3 + 2 * levels * (per_point + 1))
+    return 8 * (dense + views) + 64 * 1024
+
+
+def sidecar_paths(path: str | os.PathLike) -> dict[str, Path]:
+    """The XDMF files written beside the HDF5 result ``path``: "all" (``<stem>.xdmf``: every cell,
+    the surface and the probes; ParaView/VTK), "solid" (``<stem>.solid.xdmf``: the material cells
+    with corner values) and "surface" (``<stem>.surface.xdmf``: the refined surface); the last two
+    hold one grid or one time series each, which is what meshio reads), and "vtkhdf"
+    (``<stem>.vtkhdf``: the solid for PyVista, VTK and ParaView; ``engine.vtkhdf``)."""
+    path = Path(path)
+    return {"all": path.with_suffix(".xdmf"), "solid": path.with_name(f"{path.stem}.solid.xdmf"),
+            "surface": path.with_name(f"{path.stem}.surface.xdmf"), "vtkhdf": path.with_suffix(".vtkhdf")}
 
 
 def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) -> Path:
-    """Write ``result`` to the HDF5 file ``path`` (and ``path.with_suffix(".xdmf")`` if ``xdmf``).
+    """Write ``result`` to the HDF5 file ``path`` and, if ``xdmf``, the files of ``sidecar_paths``
+    beside it (the surface one only when the result has a surface).
 
-    Validates first (ValueError naming the dataset). Both files appear complete or not at all: they
+    Validates first (ValueError naming the dataset). The files appear complete or not at all: they
     are written under temporary names in the target directory, fsynced and renamed into place; on
     any error the temporaries are removed and existing files at the targets are left untouched.
     Returns the HDF5 path.
     """
-    from .xdmf import xdmf_document  # xdmf reads the layout this module defines
+    from .vtkhdf import write_vtkhdf
+    from .xdmf import view_document, write_view_datasets, xdmf_document  # they read this layout
 
     path = Path(path)
-    if path.suffix == ".xdmf":
-        raise ValueError(f"{path}: the HDF5 result needs another suffix than .xdmf (e.g. .h5)")
+    if path.suffix in (".xdmf", ".vtkhdf"):
+        raise ValueError(f"{path}: the HDF5 result needs another suffix than {path.suffix} (e.g. .h5)")
     validate_result(result)
-    xdmf_path = path.with_suffix(".xdmf")
     token = uuid.uuid4().hex[:12]
     tmp_h5 = path.with_name(f".{path.name}.{token}.tmp")
-    tmp_xdmf = xdmf_path.with_name(f".{xdmf_path.name}.{token}.tmp")
+    sidecars: dict[Path, str] = {}
+    temporaries = [tmp_h5]
     try:
         with open(tmp_h5, "x+b", buffering=0) as fh:
             guard = GuardedFile(fh)
             try:
                 with h5py.File(guard, "w") as f:
                     _write_h5(f, result, nodes=xdmf)
+                    if xdmf:
+                        write_view_datasets(f, result)
                     f.flush()
-                    text = xdmf_document(f, path.name) if xdmf else None
+                    if xdmf:
+                        targets = sidecar_paths(path)
+                        sidecars[targets["all"]] = xdmf_document(f, path.name)
+                        for part in ("solid", "surface"):
+                            text = view_document(f, part, path.name)
+                            if text is not None:
+                                sidecars[targets[part]] = text
             except BaseException as exc:
                 if guard.error is not None:  # what HDF5 tripped over after the disk said no
                     raise guard.error from exc
@@ -424,18 +449,30 @@ def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) 
             if guard.error is not None:
                 raise guard.error
             os.fsync(fh.fileno())
-        if text is not None:
-            with open(tmp_xdmf, "x", encoding="utf-8") as fh:
+        staged = []
+        if xdmf:
+            target = sidecar_paths(path)["vtkhdf"]
+            tmp = target.with_name(f".{target.name}.{token}.tmp")
+            temporaries.append(tmp)
+            write_vtkhdf(result, tmp)
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            staged.append((tmp, target))
+        for target, text in sidecars.items():
+            tmp = target.with_name(f".{target.name}.{token}.tmp")
+            temporaries.append(tmp)
+            with open(tmp, "x", encoding="utf-8") as fh:
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
+            staged.append((tmp, target))
         os.replace(tmp_h5, path)
-        if text is not None:
-            os.replace(tmp_xdmf, xdmf_path)
+        for tmp, target in staged:
+            os.replace(tmp, target)
         _fsync_dir(path.parent)
     except BaseException:
-        tmp_h5.unlink(missing_ok=True)
-        tmp_xdmf.unlink(missing_ok=True)
+        for tmp in temporaries:
+            tmp.unlink(missing_ok=True)
         raise
     return path
 

@@ -140,3 +140,116 @@ def xdmf_document(f: h5py.File, h5_name: str) -> str:
             series.extend(grids)
     ET.indent(root)
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# One grid per file: the solid and the refined surface (meshio, PyVista, VTK and ParaView alike)
+#
+# meshio reads an XDMF file of exactly one grid, or of one temporal collection (its
+# TimeSeriesReader), and reads each DataItem whole (no HyperSlab): so these documents hold one grid
+# (or one collection) each, and every attribute is a whole dataset under /xdmf.
+
+# Vector fields and von Mises also get values at the solid's corners (smooth colouring, warping).
+_NODE_FIELDS = ("displacement", "velocity", "von_mises")
+_TOPOLOGY = {("solid", 3): "Hexahedron", ("solid", 2): "Quadrilateral",
+             ("surface", 3): "Triangle", ("surface", 2): "Polyline"}
+
+
+def write_view_datasets(f: h5py.File, result) -> None:
+    """The solid mesh, the refined surface and their values per level under ``/xdmf`` of the open
+    file ``f``, derived from ``result`` (an ``engine.output.Result``; docs/result-format.md)."""
+    from .views import refine_surface, refined_values, solid_mesh
+
+    d = result.dim
+    vf = np.asarray(result.volume_fraction)
+    solid = solid_mesh(result.grid, vf)
+    g = f.require_group("xdmf/solid")
+    _view_dataset(g, "points", solid.points, "m", "cell_corner")
+    _view_dataset(g, "cells", solid.cells, "1", "cell_corner")
+    _view_dataset(g, "index", solid.index, "1", "cell_center")
+    _view_dataset(g, "volume_fraction", solid.cell_values(vf), "1", "cell_center")
+    surface = None
+    if result.surface_vertices is not None and len(result.surface_faces):
+        surface = refine_surface(result.surface_vertices, result.surface_faces, result.grid.spacing)
+        s = f.require_group("xdmf/surface")
+        _view_dataset(s, "vertices", surface.vertices, "m", "surface_vertex")
+        _view_dataset(s, "faces", surface.faces, "1", "surface_face")
+        s.attrs["max_edge"] = surface.max_edge
+    levels = [(f"{i:04d}", step) for i, step in enumerate(result.steps)] or [("final", result.fields)]
+    from .output import FIELDS
+
+    for key, level in levels:
+        lg = f.require_group(f"xdmf/levels/{key}")
+        if level.time is not None:
+            lg.attrs["time"] = float(level.time)
+        cells, nodes = lg.require_group("cells"), lg.require_group("nodes")
+        for name, dense in level.cells.items():
+            units = FIELDS[name].units
+            _view_dataset(cells, name, solid.cell_values(dense), units, "cell_center")
+            if name in _NODE_FIELDS:
+                _view_dataset(nodes, name, solid.node_values(dense, vf), units, "cell_corner")
+        if surface is None:
+            continue
+        sg = lg.require_group("surface")
+        for name in sorted(set(level.surface) | ({"von_mises"} & set(level.cells))):
+            values = refined_values(surface, result.surface_faces, level.surface.get(name), result.grid,
+                                    level.cells.get(name), vf, result.surface_vertices)
+            if values is not None:
+                _view_dataset(sg, name, values, FIELDS[name].units, "surface_vertex")
+    f["xdmf"].attrs["dimension"] = d
+
+
+def _view_dataset(group: h5py.Group, name: str, data: np.ndarray, units: str, location: str) -> None:
+    data = np.ascontiguousarray(data)
+    big = data.size >= 1 << 16  # small arrays stay contiguous (as in engine.output)
+    ds = group.create_dataset(name, data=data, **({"chunks": True, "compression": "gzip", "shuffle": True}
+                                                   if big else {}))
+    ds.attrs["units"] = units
+    ds.attrs["location"] = location
+
+
+def _whole_attribute(grid: ET.Element, ds: h5py.Dataset, h5_name: str, name: str, center: str, dim: int) -> None:
+    width = ds.shape[1] if ds.ndim > 1 else 1
+    kind = "Scalar" if width == 1 else ("Vector" if width == dim else "Matrix")
+    attr = ET.SubElement(grid, "Attribute", Name=name, AttributeType=kind, Center=center)
+    _hdf_item(attr, ds, h5_name)
+
+
+def _view_grid(f: h5py.File, part: str, level: h5py.Group, h5_name: str, time: float | None) -> ET.Element:
+    dim = int(f["xdmf"].attrs["dimension"])
+    g = f[f"xdmf/{part}"]
+    points, topo = (g["points"], g["cells"]) if part == "solid" else (g["vertices"], g["faces"])
+    grid = _uniform(part, time)
+    extra = {"NodesPerElement": "2"} if _TOPOLOGY[part, dim] == "Polyline" else {}
+    topology = ET.SubElement(grid, "Topology", TopologyType=_TOPOLOGY[part, dim],
+                             NumberOfElements=str(topo.shape[0]), **extra)
+    _hdf_item(topology, topo, h5_name)
+    _hdf_item(ET.SubElement(grid, "Geometry", GeometryType="XYZ" if dim == 3 else "XY"), points, h5_name)
+    if part == "solid":
+        _whole_attribute(grid, g["volume_fraction"], h5_name, "volume_fraction", "Cell", dim)
+        for group, center in (("cells", "Cell"), ("nodes", "Node")):
+            for name, ds in level.get(group, {}).items():
+                _whole_attribute(grid, ds, h5_name, name, center, dim)
+    else:
+        for name, ds in level.get("surface", {}).items():
+            _whole_attribute(grid, ds, h5_name, name, "Node", dim)
+    return grid
+
+
+def view_document(f: h5py.File, part: str, h5_name: str) -> str | None:
+    """XDMF 3 text of one view (``part`` "solid" or "surface") of the open result file ``f``: one
+    uniform grid, or one temporal collection of them for a time series; None if ``f`` has no such
+    view (no surface)."""
+    if f"xdmf/{part}" not in f:
+        return None
+    levels = f["xdmf/levels"]
+    keys = sorted(levels)
+    root = ET.Element("Xdmf", Version="3.0")
+    domain = ET.SubElement(root, "Domain")
+    if keys == ["final"]:
+        domain.append(_view_grid(f, part, levels["final"], h5_name, None))
+    else:
+        series = ET.SubElement(domain, "Grid", Name=part, GridType="Collection", CollectionType="Temporal")
+        series.extend(_view_grid(f, part, levels[k], h5_name, float(levels[k].attrs["time"])) for k in keys)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

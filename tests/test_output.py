@@ -209,7 +209,7 @@ def test_failed_write_leaves_no_file_and_no_temporary(tmp_path, monkeypatch):
 def test_failed_write_keeps_previous_files_intact(tmp_path, monkeypatch):
     write_result(make_result(3, seed=1), tmp_path / "r.h5")
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
-    assert sorted(before) == ["r.h5", "r.xdmf"]
+    assert sorted(before) == ["r.h5", "r.solid.xdmf", "r.surface.xdmf", "r.vtkhdf", "r.xdmf"]
 
     def broken_xdmf(f, name):  # fails after the whole HDF5 temporary is written
         raise RuntimeError("xdmf failed")
