@@ -84,6 +84,11 @@ class Storage:
     def xdmf_path(self, job_id: str) -> Path:
         return self.result_dir(job_id) / f"{job_id}.xdmf"
 
+    def result_file(self, job_id: str, suffix: str) -> Path:
+        """A file published beside the HDF5 result: ``<id><suffix>`` (".vtkhdf", ".solid.xdmf",
+        ".surface.xdmf", ".png" for the preview picture)."""
+        return self.result_dir(job_id) / f"{job_id}{suffix}"
+
     def clear_attempts(self, job_id: str) -> None:
         """Remove staging areas and any unpublished result of earlier attempts."""
         d = self.job_dir(job_id)

@@ -34,6 +34,10 @@ class Timings(BaseModel):
 class ResultInfo(BaseModel):
     url: str = Field(description="The HDF5 result (Range requests supported).")
     xdmf_url: str = Field(description="The XDMF sidecar; save it beside the HDF5 file under the names given.")
+    files: dict[str, str] = Field(default_factory=dict, description=(
+        "Viewer files (docs/result-format.md): vtkhdf (PyVista, VTK, ParaView), solid_xdmf and surface_xdmf "
+        "(meshio; they refer to <id>.h5, save them beside it)."))
+    preview_url: str | None = Field(None, description="A PNG of the deformed surface (when the job output a surface).")
     bytes: int | None = None
     filename: str
 
@@ -84,7 +88,13 @@ def job_out(job: Job) -> JobOut:
         run = (now - job.started_at).total_seconds()
     result = None
     if job.status == "succeeded":
-        result = ResultInfo(url=f"/jobs/{job.id}/result", xdmf_url=f"/jobs/{job.id}/result.xdmf",
+        base = f"/jobs/{job.id}"
+        surface = bool(json.loads(job.spec).get("output", {}).get("surface", True))
+        files = {"vtkhdf": f"{base}/result.vtkhdf", "solid_xdmf": f"{base}/result.solid.xdmf"}
+        if surface:
+            files["surface_xdmf"] = f"{base}/result.surface.xdmf"
+        result = ResultInfo(url=f"{base}/result", xdmf_url=f"{base}/result.xdmf", files=files,
+                            preview_url=f"{base}/preview.png" if surface else None,
                             bytes=job.result_bytes, filename=f"{job.id}.h5")
     summary = {k: v for k, v in job.summary.items() if k not in ("warnings", "stage_times")}
     return JobOut(

@@ -152,6 +152,45 @@ def get_result_xdmf(job: JobDep, storage: StorageDep) -> FileResponse:
     return _finished_file(job, storage.xdmf_path(job.id), XDMF_TYPE)
 
 
+VIEWER_FILES = {  # route suffix -> (media type, what it is)
+    "result.vtkhdf": ("application/x-hdf5", "The solid as VTKHDF (PyVista, VTK, ParaView; time steps)."),
+    "result.solid.xdmf": (XDMF_TYPE, "The solid as one XDMF grid / time series (meshio; refers to <id>.h5)."),
+    "result.surface.xdmf": (XDMF_TYPE, "The refined surface as one XDMF grid / time series (refers to <id>.h5)."),
+}
+
+
+def _viewer_route(route: str, media_type: str, what: str) -> None:
+    suffix = route.removeprefix("result")
+
+    def handler(job: JobDep, storage: StorageDep) -> FileResponse:
+        return _finished_file(job, storage.result_file(job.id, suffix), media_type)
+
+    router.add_api_route(f"/{{job_id}}/{route}", handler, methods=["GET"], response_class=FileResponse,
+                         responses={**_ERRORS, 200: {"content": {media_type: {}}, "description": what},
+                                    409: {"description": "Not (successfully) finished."}},
+                         summary=f"Download {what[0].lower()}{what[1:]}", name=f"get_{route.replace('.', '_')}")
+
+
+for _route, (_media, _what) in VIEWER_FILES.items():
+    _viewer_route(_route, _media, _what)
+
+
+@router.get(
+    "/{job_id}/preview.png",
+    response_class=FileResponse,
+    responses={**_ERRORS, 200: {"content": {"image/png": {}}, "description": "The deformed surface, coloured."},
+               409: {"description": "Not (successfully) finished."}},
+    summary="A picture of the result: deformed surface coloured by von Mises, undeformed outline",
+)
+def get_preview(job: JobDep, storage: StorageDep) -> FileResponse:
+    path = storage.result_file(job.id, ".png")
+    if job.status == JobStatus.succeeded.value and not path.is_file():
+        reason = next((w for w in job.warnings if w.startswith("preview:")), None)
+        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=reason or (
+            f"job {job.id} has no picture: its output has no surface (output.surface is false)"))
+    return _finished_file(job, path, "image/png")
+
+
 @router.delete(
     "/{job_id}",
     responses={

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from fastapi import APIRouter, Request, Response
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
@@ -12,6 +14,16 @@ from ..models import Health
 
 public = APIRouter(tags=["system"])
 router = APIRouter(tags=["system"])
+
+
+_PAGE = Path(__file__).resolve().parents[1] / "static" / "index.html"
+
+
+@public.get("/", response_class=HTMLResponse, summary="The web page: jobs, a submit form, pictures, downloads")
+def index() -> HTMLResponse:
+    # static on purpose (no token needed to load it): the page asks for the token and sends it
+    # with every request it makes
+    return HTMLResponse(_PAGE.read_text(encoding="utf-8"))
 
 
 @public.get(
