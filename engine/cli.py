@@ -11,6 +11,7 @@ removed on the way out (``engine.output.write_result``).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import sys
@@ -104,17 +105,59 @@ def _check_memory(grid, method: str, degree: int, limits) -> None:
 
 
 class ProgressBar:
-    """One self-overwriting line on stderr: ``[#####.....]  50%  stage  detail``."""
+    """One self-overwriting line on stderr:
+    ``[#####.....]  50% solve  step 1/3, 120 it., rel. residual 3.1e-05, ETA 4 s (2.0 s)``.
 
-    def __init__(self, stream=sys.stderr, width: int = 30):
+    The ETA of a solve comes from the relative residual's way down to ``rtol`` (CG's residual falls
+    about geometrically, so its logarithm measures the way done), over the steps of the analysis.
+    """
+
+    def __init__(self, stream=sys.stderr, width: int = 30, rtol: float | None = None):
         self.stream, self.width, self.start = stream, width, time.perf_counter()
         self.tty = stream.isatty()
+        self.rtol = rtol
+        self.solve_start: float | None = None
+
+    def _eta(self, stage: str, info: dict) -> float | None:
+        """Seconds left in the solve [s], or None when nothing can be said yet."""
+        if stage != "solve" or self.rtol is None or not 0 < self.rtol < 1:
+            return None
+        now = time.perf_counter()
+        if self.solve_start is None:
+            self.solve_start = now
+        residual = info.get("residual")
+        if residual is None or not residual > 0:
+            return None
+        way = min(max(math.log(residual) / math.log(self.rtol), 0.0), 1.0)
+        done = (info.get("step", 1) - 1 + way) / max(info.get("steps", 1), 1)
+        elapsed = now - self.solve_start
+        if done <= 0.02 or elapsed < 0.2:
+            return None
+        return elapsed * (1 - done) / done
+
+    @staticmethod
+    def _detail(info: dict) -> str:
+        parts = []
+        if "step" in info and "steps" in info:
+            parts.append(f"step {info['step']}/{info['steps']}")
+        if "iterations" in info:
+            parts.append(f"{info['iterations']} it.")
+        if info.get("residual") is not None:
+            parts.append(f"rel. residual {info['residual']:.1e}")
+        if "shape" in info:
+            parts.append("grid " + "x".join(map(str, info["shape"])))
+        if info.get("cache_hit"):
+            parts.append("cached")
+        return ", ".join(parts)
 
     def __call__(self, stage: str, fraction: float, info: dict) -> None:
         if not self.tty and stage == "geometry":
             return  # a log gets lines from the grid on: a job refused by the checks stays one line
         filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
-        detail = " ".join(f"{k}={v}" for k, v in info.items())
+        detail = self._detail(info)
+        eta = self._eta(stage, info)
+        if eta is not None:
+            detail += f", ETA {eta:.0f} s"
         line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:3.0f}% {stage:10s} {detail}"
         line += f" ({time.perf_counter() - self.start:.1f} s)"
         self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
@@ -197,7 +240,7 @@ def cmd_run(args) -> int:
         return _error(problem)
     if args.arch:
         spec = spec.model_copy(update={"solver": spec.solver.model_copy(update={"arch": args.arch})})
-    bar = ProgressBar()
+    bar = ProgressBar(rtol=spec.solver.rtol)
     levels = 1 + (spec.analysis.steps if spec.analysis.kind != "static" else 0)
 
     def progress(stage: str, fraction: float, info: dict) -> None:
