@@ -1,4 +1,4 @@
-"""The job specification (DESIGN.md "Job spec"): the models of a job, parsing and error formatting.
+"""The job specification (reference: the exported JSON Schema, schemas/json/job.schema.json): the models of a job, parsing and error formatting.
 
 The conventions every model follows (unknown keys, finite floats, SI units, vectors coupled to
 ``JobSpec.dimension``, tagged unions) are stated in :mod:`schemas.base`; regions live in
@@ -322,7 +322,7 @@ _DIMENSION_ADAPTER = TypeAdapter(Dimension)
 
 
 class JobSpec(SpecModel):
-    """A complete simulation job (DESIGN.md "Job spec"). SI units throughout."""
+    """A complete simulation job. SI units throughout."""
 
     model_config = ConfigDict(title="JobSpec")
 

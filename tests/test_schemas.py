@@ -1,4 +1,4 @@
-"""The job spec: the committed JSON Schema, the DESIGN.md example, defaults and the error messages."""
+"""The job spec: the committed JSON Schema, the design sketch's example, defaults and the error messages."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ from schemas.export import SCHEMA_PATH, main as export_main, schema_text
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# DESIGN.md "Job spec", verbatim apart from the comments.
+# The example job of the project's design sketch, verbatim apart from the comments.
 DESIGN_EXAMPLE = {
     "geometry": {"mesh": "part.stl", "scale": 1.0},
     "grid": {"cell_size": 0.02},

@@ -2,8 +2,8 @@
 
 ``Level`` owns the Taichi arrays of one level and sequences the kernels of ``kernels.py``:
 A = K + shift M restricted to the free DOFs (``mask``), where K is the Hessian of the discrete
-energy (DESIGN.md) and M the lumped mass from face fractions (only when a shift is set: static
-runs never build a mass). The finest level comes from exact volume fractions
+energy (strain energy weighted by control-volume fractions; README, "The staggered method") and
+M the lumped mass from face fractions (only when a shift is set: static runs never build a mass). The finest level comes from exact volume fractions
 (:func:`make_fine_level`), coarser ones from averaging cell fractions (:func:`make_coarse_level`).
 """
 
