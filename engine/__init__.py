@@ -15,7 +15,7 @@ Importing this package never initialises Taichi; ``engine.runtime.init`` does, o
 
 import os as _os
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # Set before any module imports taichi: no version check calling out to the internet, and no
 # banner on stdout (stdout carries the CLI's output).

@@ -104,7 +104,7 @@ def test_layout_units_and_dimension_scales(tmp_path):
     write_result(r, tmp_path / "r.h5")
     with h5py.File(tmp_path / "r.h5") as f:
         assert dict(f.attrs) | {"spec": None} == {"format": "voxelastic-result", "format_version": 1,
-                                                 "method": "staggered", "spec": None, "version": "0.1.0"}
+                                                 "method": "staggered", "spec": None, "version": "0.2.0"}
         assert json.loads(f.attrs["spec"]) == r.spec
         g = f["grid"].attrs
         np.testing.assert_array_equal(g["origin"], [-0.5, 0.25, 1.0])
