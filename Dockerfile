@@ -28,9 +28,11 @@ ENV PYTHONUNBUFFERED=1 \
     VOXELASTIC_PORT=8000
 # Shared libraries the wheels link but do not bundle: Taichi's core links the X11 client library
 # (libX11.so.6 and what it pulls in: libxcb, libXau, libXdmcp); without it no worker process can
-# start ("ImportError: libX11.so.6", issue 18). zlib is in the base already.
+# start ("ImportError: libX11.so.6", issue 18). zlib is in the base already. VTK renders the
+# preview pictures off screen through Mesa's EGL (software; no display, no GPU).
 RUN apt-get update \
     && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libx11-6 \
+       libegl1 libegl-mesa0 libgl1-mesa-dri libxrender1 \
     && rm -rf /var/lib/apt/lists/*
 RUN useradd --create-home --uid 1000 voxelastic \
     && mkdir -p /data /home/voxelastic/.cache/voxelastic \
