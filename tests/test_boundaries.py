@@ -1,4 +1,4 @@
-"""Boundaries act on their surface patch, in both methods alike (DESIGN.md "Job spec").
+"""Boundaries act on their surface patch, in both methods alike (README, "What works today").
 
 The staggered method holds a displacement patch weakly (Nitsche's method at the patch's surface
 points, engine/staggered/nitsche.py), DG likewise; both take their patches, loads and errors from
