@@ -14,7 +14,7 @@ import scipy.sparse as sp
 
 from . import kernels
 from .elements import Elements
-from .integrals import Basis, element_gradients, face_products, patch_products
+from .integrals import Basis, PatchProjection, element_gradients, face_products, patch_products
 
 
 @dataclass
@@ -73,9 +73,10 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     todo = np.concatenate(picks + [np.nonzero(~ref)[0]]).astype(np.int64)
     if len(todo) == 0:
         return out
-    M, N = face_products(el, basis, todo, rest)
+    M, N, P = face_products(el, basis, todo, rest)
     blocks = np.empty((len(todo), 2, 2, s, s))
-    kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(N), el.axis[todo].astype(np.int32),
+    kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(P), np.ascontiguousarray(N),
+                        el.axis[todo].astype(np.int32),
                         np.ascontiguousarray(penalty[todo]), mu, lam, *weights, blocks)
     start = 0
     for a, pick in enumerate(picks):
@@ -88,21 +89,23 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
 
 def nitsche_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, triangles: np.ndarray,
                    element: np.ndarray, patches: np.ndarray, mask: np.ndarray, weights: tuple[float, float] = (1.0, 1.0)
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, PatchProjection]:
     """Weak Dirichlet blocks [b, 3 n, 3 n] of surface patches (one element each; ``patches`` [T]
-    groups the triangles, ``mask`` [b, 3] the prescribed components; weights: penalty, consistency)
-    and their penalties [b] [1/m]:
-    eta_b = eta area(patch) / vol(K) (eq. 20 with the outside as an element of infinite volume)."""
+    groups the triangles, ``mask`` [b, 3] the prescribed components; weights: penalty, consistency),
+    their penalties [b] [1/m]:
+    eta_b = eta area(patch) / vol(K) (eq. 20 with the outside as an element of infinite volume),
+    and the patches' projection onto degree k - 1 (the volumetric penalty's, for the load side)."""
     count = len(mask)
-    Mnn, Nn, area = patch_products(el, basis, triangles, element, patches, count)
+    Mnn, Nn, area, low = patch_products(el, basis, triangles, element, patches, count)
+    Pnn = np.einsum("bpiu,bqju->bpqij", low.R, low.R)
     owner = np.zeros(count, dtype=np.int64)
     owner[patches] = element
     penalty = eta * area / el.volume[owner]
     s = 3 * basis.size
     out = np.empty((count, s, s))
-    kernels.nitsche_blocks(np.ascontiguousarray(Mnn), np.ascontiguousarray(Nn), np.ascontiguousarray(mask, dtype=np.float64),
-                           penalty, mu, lam, *weights, out)
-    return out, penalty
+    kernels.nitsche_blocks(np.ascontiguousarray(Mnn), np.ascontiguousarray(Pnn), np.ascontiguousarray(Nn),
+                           np.ascontiguousarray(mask, dtype=np.float64), penalty, mu, lam, *weights, out)
+    return out, penalty, low
 
 
 def to_matrix(blocks: Blocks, count: int) -> sp.csr_matrix:

@@ -31,7 +31,7 @@ from ..solvers.rigid import UnbalancedLoadError
 from . import assembly, warping
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .embedding import SurfaceEmbedding
-from .integrals import Basis, make_basis, surface_points
+from .integrals import Basis, make_basis, projected_load, surface_points
 from .location import locate, owners
 from .quadrature import VolumeRule, volume_rule
 
@@ -178,7 +178,8 @@ class DGElasticity:
     def _dirichlet_rhs(self, eta_b: np.ndarray, value_scale: float = 1.0, rotations: np.ndarray | None = None
                        ) -> np.ndarray:
         """Nitsche right-hand side [E, 3, n] for the prescribed values g (times value_scale):
-        -int (Pi g) . sigma(v) n + eta_b int C : (Pi g x n) : (Pi v x n). Warped (rotations [E, 3, 3]):
+        -int (Pi g) . sigma(v) n + eta_b int (mu (Pi g . v + (Pi g . n) (v . n)) + lam P(Pi g . n) P(v . n)), P the
+        projection onto degree k - 1 (``kernels.nitsche_blocks``). Warped (rotations [E, 3, 3]):
         the consistency part sees g in the element's frame, R^T (x + g) - x, and its force is rotated back."""
         el, basis, n = self.elements, self.basis, self.n
         out = np.zeros((el.count, 3, n))
@@ -208,8 +209,11 @@ class DGElasticity:
         xi = self._xi(sp_.element, sp_.points)
         mu, lam = self.mu, self.lam
         gn = np.einsum("qa,qa->q", g, nrm)
-        pen = eta_b[patch][:, None] * mask * (mu * g + (mu + lam) * gn[:, None] * nrm)  # [Q, p]
+        pen = eta_b[patch][:, None] * mask * mu * (g + gn[:, None] * nrm)  # [Q, p]
         out += basis.tested(el.count, sp_.element, xi, w[:, None] * pen)
+        # the volumetric part penalises only the normal jump's projection onto degree k - 1 (kernels.nitsche_blocks)
+        out += projected_load(basis, self.patch_low, self.patch_owner, P["mask"], xi, patch,
+                              lam * eta_b[patch] * w * gn, el.count)
         if self.flux != "ip":
             return out
         # g . sigma(psi_I e_p) n = sum_a V_pa d_a psi_I, V_pa = mu (g_p n_a + n_p g_a) + lam (g . n) delta_pa
@@ -289,8 +293,7 @@ class DGElasticity:
         """Assemble and factorise; double eta until an IP matrix is positive definite."""
         for attempt in range(MAX_DOUBLINGS + 1):
             t = time.perf_counter()
-            groups, eta_b = self._groups()
-            self.eta_b = eta_b
+            groups, self.eta_b = self._groups()
             if self.rotations is not None:
                 groups, self.warp_load = warping.rotate(groups, self.rotations, warping.reference_state(self))
             A = assembly.to_matrix(assembly.Blocks(np.concatenate([g.rows for g in groups]),
@@ -374,14 +377,15 @@ class DGElasticity:
             owner = np.zeros(P["count"], dtype=np.int64)
             owner[P["patch"]] = P["element"]
             args = (el, basis, mu, lam, eta, P["triangles"], P["element"], P["patch"], P["mask"])
+            self.patch_owner = owner
             if warp:
-                pen, eta_b = assembly.nitsche_blocks(*args, weights=(1.0, 0.0))
+                pen, eta_b, self.patch_low = assembly.nitsche_blocks(*args, weights=(1.0, 0.0))
                 groups.append(assembly.Group(owner, owner, pen))
                 if ip:
-                    cons, _ = assembly.nitsche_blocks(*args, weights=(0.0, 1.0))
+                    cons, _, _ = assembly.nitsche_blocks(*args, weights=(0.0, 1.0))
                     groups.append(assembly.Group(owner, owner, cons, owner))
             else:
-                both, eta_b = assembly.nitsche_blocks(*args, weights=(1.0, ip))
+                both, eta_b, self.patch_low = assembly.nitsche_blocks(*args, weights=(1.0, ip))
                 groups.append(assembly.Group(owner, owner, both))
         return groups, eta_b
 

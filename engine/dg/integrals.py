@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..geometry.moments import area_terms, cell_moments, triangle_rule
+from ..geometry.moments import area_terms, cell_moments, monomial_exponents, triangle_rule
 from . import basis as B
 from .elements import Elements
 
@@ -102,13 +102,14 @@ def element_gradients(el: Elements, basis: Basis) -> tuple[np.ndarray, np.ndarra
 
 
 def face_products(el: Elements, basis: Basis, faces: np.ndarray, rest: float = 1.0
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interface integrals of the faces ``faces`` [F']:
 
     M[f, X, Y, I, J] = int_f psi^X_I psi^Y_J dA [m^2], N[f, X, Y, a, I, J] = int_f psi^X_I d_a psi^Y_J dA [m]
     with sides X, Y in (minus, plus). ``rest`` < 1 weighs M's part orthogonal to constants on the face
     down: M = Mbar + rest (M - Mbar), Mbar = (int_f psi^X_I dA) (int_f psi^Y_J dA) / area(f), the
-    product of the face means.
+    product of the face means. P[f, X, Y, I, J] = int_f Pi psi^X_I Pi psi^Y_J dA [m^2] with Pi the L2
+    projection onto polynomials of degree k - 1 on the face (``low_products``; k = 1: P = Mbar).
     """
     k, h = basis.degree, basis.h
     sides = (el.minus[faces], el.plus[faces])
@@ -133,7 +134,43 @@ def face_products(el: Elements, basis: Basis, faces: np.ndarray, rest: float = 1
                 M[:, X, Y] = mean + rest * (M[:, X, Y] - mean)
             dY = np.einsum("fjs,ast->fajt", A[Y], D)
             N[:, X, Y] = h * np.einsum("fit,fajt->faij", AH, dY)
-    return M, N
+    return M, N, low_products(A, H, el.axis[faces], k, h)
+
+
+def low_products(A: list[np.ndarray], H: np.ndarray, axis: np.ndarray, degree: int, h: float) -> np.ndarray:
+    """P[f, X, Y, I, J] = int_f Pi psi^X_I Pi psi^Y_J dA [m^2], Pi the L2 projection onto P_{k-1}(f).
+
+    A[X] [F, n, n]: the sides' basis rows in the face frame's monomials, H [F, n, n] the face's Hankel
+    matrix, axis [F] its normal. The face is planar with eta_axis constant on it, so P_{k-1}(f) is
+    spanned by the monomials of degree < k without eta_axis; with C^X = A[X] H[:, S] (moments against
+    them) and G = H[S, S], P = h^2 C^X G^+ C^Y^T.
+    """
+    exps = monomial_exponents(3, degree)
+    low = exps.sum(axis=1) < degree
+    n = len(exps)
+    P = np.empty((len(axis), 2, 2, n, n))
+    for a in range(3):
+        on = np.nonzero(axis == a)[0]
+        if len(on) == 0:
+            continue
+        S = np.nonzero(low & (exps[:, a] == 0))[0]
+        W = pseudo_root(H[on][:, S[:, None], S[None, :]])
+        R = [np.einsum("fit,ftu->fiu", A[X][on] @ H[on][:, :, S], W) for X in range(2)]
+        for X in range(2):
+            for Y in range(2):
+                P[on, X, Y] = h**2 * np.einsum("fiu,fju->fij", R[X], R[Y])
+    return P
+
+
+def pseudo_root(G: np.ndarray, cutoff: float = 1e-12) -> np.ndarray:
+    """W [..., r, r] with W W^T = G^+ for Gram matrices G [..., r, r] of the degree < k polynomials on a
+    face or patch. Jacobi-scaled, eigenvalues below ``cutoff`` of the largest dropped: on a sliver face
+    the linear monomial across it nearly repeats the constant, on a flat patch the traces of 1, x, y, z
+    are dependent; the projection onto their span stays bounded either way."""
+    scale = 1.0 / np.sqrt(np.maximum(np.einsum("...ii->...i", G), 1e-300))
+    w, V = np.linalg.eigh(G * scale[..., :, None] * scale[..., None, :])
+    root = np.where(w > cutoff * w[..., -1:], 1.0 / np.sqrt(np.where(w > 0, w, 1.0)), 0.0)
+    return scale[..., :, None] * V * root[..., None, :]
 
 
 @dataclass
@@ -163,13 +200,24 @@ def surface_points(triangles: np.ndarray, element: np.ndarray, degree: int) -> S
                          triangle=np.repeat(np.arange(len(tri)), q))
 
 
+@dataclass
+class PatchProjection:
+    """The L2 projection Pi onto the traces of P_{k-1}(K) on each surface patch (basis psi_s, s < m):
+    R[b, p, I, u] with int Pi(psi_I n_p) Pi(psi_J n_q) dA = sum_u R[b, p, I, u] R[b, q, J, u] [m^2], and
+    W[b, s, u] [1/m] with G^+ = W W^T, G[s, t] = int psi_s psi_t dA; for data d on the patch,
+    int Pi(d) Pi(psi_I n_p) = sum_{s, u} (int d psi_s) W[b, s, u] R[b, p, I, u]."""
+
+    R: np.ndarray
+    W: np.ndarray
+
+
 def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: np.ndarray,
-                   patches: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   patches: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, PatchProjection]:
     """Exact integrals over surface patches (triangles [T, 3, 3] [m] of ``element`` [T], grouped by
     ``patches`` [T] in 0..count-1, one element per patch):
 
     Mnn[b, a, c, I, J] = int psi_I psi_J n_a n_c dA [m^2], Nn[b, a, c, I, J] = int psi_I d_a psi_J n_c dA [m],
-    area [b] [m^2].
+    area [b] [m^2], and the projection onto degree < k (``PatchProjection``).
     """
     k, h = basis.degree, basis.h
     n = basis.size
@@ -182,6 +230,8 @@ def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: n
     m2 = np.zeros((count, 3, 3) + moments.shape[1:])
     np.add.at(m1, patches, normal[:, :, None] * moments[:, None, :])
     np.add.at(m2, patches, normal[:, :, None, None] * normal[:, None, :, None] * moments[:, None, None, :])
+    m0 = np.zeros((count,) + moments.shape[1:])
+    np.add.at(m0, patches, moments)
     area = np.zeros(count)
     np.add.at(area, patches, 0.5 * np.linalg.norm(cross, axis=1))
     owner = np.zeros(count, dtype=np.int64)
@@ -191,4 +241,23 @@ def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: n
     Mnn = h**2 * np.einsum("bis,bacst,bjt->bacij", T, H2, T)
     G = np.einsum("bjs,ast->bajt", T, B.derivative(k))
     Nn = h * np.einsum("bis,bcst,bajt->bacij", T, H1, G)
-    return Mnn, Nn, area
+    low = B.size(k - 1)
+    W = pseudo_root(np.einsum("bis,bst,bjt->bij", T[:, :low], B.hankel(m0, k), T[:, :low]))
+    R = h * np.einsum("bis,bcst,bjt,bju->bciu", T, H1, T[:, :low], W)
+    return Mnn, Nn, area, PatchProjection(R, W / h)
+
+
+def projected_load(basis: Basis, low: PatchProjection, owner: np.ndarray, mask: np.ndarray, points_xi: np.ndarray,
+                   patch: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """out[e, p, I] = sum over patches b of element e of m_p int Pi(d) Pi(psi_I n_p) dA for patch data d
+    given at quadrature points (``values`` [Q], weights included; ``patch`` [Q], ``points_xi`` [Q, 3] in
+    the element frame): the load side of the projected volumetric penalty. owner [b], mask [b, 3]."""
+    k = basis.degree
+    m = low.W.shape[1]
+    acc = np.zeros((len(owner), basis.size))
+    np.add.at(acc, patch, values[:, None] * B.monomials(points_xi, k))
+    moments = np.einsum("bis,bs->bi", basis.T[owner][:, :m], acc)  # int d psi_s dA, s < m
+    coef = np.einsum("bs,bsu->bu", moments, low.W)
+    out = np.zeros((count, 3, basis.size))
+    np.add.at(out, owner, mask[:, :, None] * np.einsum("bu,bpiu->bpi", coef, low.R))
+    return out

@@ -47,16 +47,21 @@ def traction(N: ti.template(), b, X, Y, I, J, p, q, axis, mu: F64, lam: F64) -> 
 
 
 @ti.kernel
-def face_blocks(M: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_minus: F64, w_plus: F64,
-                out: ND5):
+def face_blocks(M: ND5, P: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_minus: F64,
+                w_plus: F64, out: ND5):
     """Interface blocks out[f, X, Y] (X: test side, Y: trial side; 0 = minus, 1 = plus).
 
     Symmetric interior penalty (Kaufmann et al. eq. 21) with normal n = e_axis, jump [u] = (u- - u+) x n:
-    - consistency * (int [v] : {sigma(u)} + int [u] : {sigma(v)}) + eta_f int [u] : C : [v],
-    the penalty measured in the material's norm, C : (j x n) : (w x n) = mu j.w + (mu + lam) j_n w_n.
+    - consistency * (int [v] : {sigma(u)} + int [u] : {sigma(v)}) + penalty, the penalty
+    eta_f int (mu ([u].[v] + [u]_n [v]_n) + lam Pi[u]_n Pi[v]_n): the shear part of C : (j x n) : (w x n)
+    on the whole jump, the volumetric part only on the normal jump's projection Pi onto P_{k-1}(f),
+    which is all the consistency term lam {div u} [v]_n sees (div u has degree k - 1). Penalising the
+    whole normal jump with lam forces normal continuity as lam grows, and P_k fields with continuous
+    normal traces cannot follow a divergence-free field on a hex grid: locking (docs/design-notes.md).
     Weights pick parts: w_pen the penalty, w_minus / w_plus the consistency terms whose stress is
     taken on the minus / plus side (warping rotates them with that side's rotation, section 6.1);
-    (1, 1, 1) is IP, (1, 0, 0) Babuska-Zlamal. M[f, X, Y, I, J] = int_f psi^X_I psi^Y_J.
+    (1, 1, 1) is IP, (1, 0, 0) Babuska-Zlamal. M[f, X, Y, I, J] = int_f psi^X_I psi^Y_J,
+    P[f, X, Y, I, J] = int_f Pi psi^X_I Pi psi^Y_J.
     """
     nb = M.shape[3]
     for f, X, Y, I, J in ti.ndrange(M.shape[0], 2, 2, nb, nb):
@@ -67,22 +72,25 @@ def face_blocks(M: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, w_pen: F
         ax = axis[f]
         for p in ti.static(range(3)):
             for q in ti.static(range(3)):
-                pen = sx * sy * eta[f] * M[f, X, Y, I, J] * (mu * delta(p, q) + (mu + lam) * delta(p, ax) * delta(q, ax))
+                pen = sx * sy * eta[f] * (mu * M[f, X, Y, I, J] * (delta(p, q) + delta(p, ax) * delta(q, ax))
+                                          + lam * P[f, X, Y, I, J] * delta(p, ax) * delta(q, ax))
                 cons = -0.5 * (wy * sx * traction(N, f, X, Y, I, J, p, q, ax, mu, lam)
                                + wx * sy * traction(N, f, Y, X, J, I, q, p, ax, mu, lam))
                 out[f, X, Y, p * nb + I, q * nb + J] = w_pen * pen + cons
 
 
 @ti.kernel
-def nitsche_blocks(M: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_cons: F64, out: ND3):
+def nitsche_blocks(M: ND5, P: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_cons: F64,
+                   out: ND3):
     """Weak Dirichlet blocks on a surface patch (u- = g, v- = 0, sigma- = sigma+; eq. 21).
 
     M[b, a, c, I, J] = int psi_I psi_J n_a n_c; the mass int psi_I psi_J is its trace over a = c
-    (n is a unit vector). w_pen / w_cons weigh the penalty / consistency parts (warping rotates
-    only the latter).
+    (n is a unit vector). P[b, a, c, I, J] = int Pi(psi_I n_a) Pi(psi_J n_c), Pi the projection onto
+    the traces of P_{k-1}(K): the volumetric penalty's part, as on interfaces (``face_blocks``).
+    w_pen / w_cons weigh the penalty / consistency parts (warping rotates only the latter).
     Nn[b, a, c, I, J] = int psi_I d_a psi_J n_c. mask[b, p] = 1 for prescribed components.
     Entry ((p, I), (q, J)) = -m_p t(I, J; p, q) - m_q t(J, I; q, p) + eta_b m_p m_q
-    int psi_I psi_J (mu delta_pq + (mu + lam) n_p n_q), with t the traction of (psi_J e_q) against psi_I.
+    (mu (delta_pq int psi_I psi_J + M_pq) + lam P_pq), with t the traction of (psi_J e_q) against psi_I.
     """
     nb = M.shape[3]
     for b, I, J in ti.ndrange(M.shape[0], nb, nb):
@@ -93,7 +101,7 @@ def nitsche_blocks(M: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F64, w_pe
             for q in ti.static(range(3)):
                 t_ij = mu * (delta(p, q) * divIJ + Nn[b, p, q, I, J]) + lam * Nn[b, q, p, I, J]
                 t_ji = mu * (delta(p, q) * divJI + Nn[b, q, p, J, I]) + lam * Nn[b, p, q, J, I]
-                pen = eta[b] * (mu * delta(p, q) * mass + (mu + lam) * M[b, p, q, I, J])
+                pen = eta[b] * (mu * (delta(p, q) * mass + M[b, p, q, I, J]) + lam * P[b, p, q, I, J])
                 out[b, p * nb + I, q * nb + J] = (w_cons * (-mask[b, p] * t_ij - mask[b, q] * t_ji)
                                                   + w_pen * mask[b, p] * mask[b, q] * pen)
 
