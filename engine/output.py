@@ -389,9 +389,12 @@ def estimate_result_bytes(shape: Sequence[int], fields: Sequence[str], *, levels
     per_point = sum(max(1, len(components(name, dim))) for name in fields)
     per_level = (cells + surface_vertices + probes) * per_point
     dense = cells + corners * dim + 3 * surface_vertices + levels * per_level
-    refined = MAX_REFINED_FACES if surface_vertices else 0
-    views = 2 * (corners * 3 + cells * (2**dim + dim + 1) + levels * (cells + corners) * (per_point + 1)) \
-        + refined * (3 + 2 * levels * (per_point + 1))
+    # a surface meets about cells^((d-1)/d) cells of the grid around it; refined to the cell size it
+    # has a few vertices in each (8 allowed), and never more than the facet cap allows
+    refined = min(MAX_REFINED_FACES // 2, max(surface_vertices, 8 * math.ceil(cells ** ((dim - 1) / dim))))
+    refined = refined if surface_vertices else 0
+    views = 2 * (corners * 3 + cells * (2**dim + dim + 1) + levels * (cells * per_point + corners * (dim + 1))) \
+        + refined * (2 * dim + 1 + levels * (per_point + 1))
     return 8 * (dense + views) + 64 * 1024
 
 

@@ -78,3 +78,28 @@ def render_preview(result, path: str | os.PathLike, *, step: int | None = None,
     plotter.screenshot(str(path))
     plotter.close()
     return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m engine.preview RESULT.h5 PICTURE.png``: the picture of a stored result (what the
+    service runs in a child process, so that VTK never loads into the API process). Exit 2 with one
+    line on stderr when the result cannot be read or has no surface."""
+    import sys
+
+    from .errors import ResultFormatError
+    from .output import read_result
+
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 2:
+        print("usage: python -m engine.preview RESULT.h5 PICTURE.png", file=sys.stderr)
+        return 2
+    try:
+        render_preview(read_result(args[0]), args[1])
+    except (ResultFormatError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -99,4 +99,4 @@ def _steps(root: h5py.Group, times: list[float], n_cells: int, n_points: int,
 
 
 def _compressed(size: int) -> dict:
-    return {"chunks": True, "compression": "gzip", "shuffle": True} if size >= 1 << 16 else {}
+    return {"chunks": True, "compression": "gzip", "shuffle": True} if size >= 1 << 10 else {}

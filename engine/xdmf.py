@@ -201,7 +201,9 @@ def write_view_datasets(f: h5py.File, result) -> None:
 
 def _view_dataset(group: h5py.Group, name: str, data: np.ndarray, units: str, location: str) -> None:
     data = np.ascontiguousarray(data)
-    big = data.size >= 1 << 16  # small arrays stay contiguous (as in engine.output)
+    # compressed from a few kB on: connectivity and refined-surface arrays shrink 3-10x (the
+    # bundled example at 32 cells: the file 1.06 MB -> 0.47 MB; 0.08 MB without the viewer data)
+    big = data.size >= 1 << 10
     ds = group.create_dataset(name, data=data, **({"chunks": True, "compression": "gzip", "shuffle": True}
                                                    if big else {}))
     ds.attrs["units"] = units

@@ -127,20 +127,6 @@ def _plain(info: dict) -> dict[str, Any]:
     return out
 
 
-def _render_preview(result, path: Path) -> str | None:
-    """Render the job's picture beside its result; a picture that cannot be made (no OpenGL in
-    this worker's environment, say) is a warning, never a failed job. Returns the warning."""
-    try:
-        from engine.preview import render_preview
-
-        render_preview(result, path)
-        return None
-    except Exception as exc:  # the result itself is fine: say why there is no picture
-        path.unlink(missing_ok=True)
-        traceback.print_exc(file=sys.stderr)
-        return f"preview: no picture could be rendered ({type(exc).__name__}: {exc})"
-
-
 def run_task(task: Task, progress) -> tuple:
     """Run one attempt; returns ("done", summary) or ("error", kind, message)."""
     from engine.errors import VoxelasticError
@@ -181,12 +167,6 @@ def run_task(task: Task, progress) -> tuple:
         report = result.solver
         stage_times = dict(report.stage_times) if report else {}
         stage_times["write"] = time.perf_counter() - t_write
-        if result.surface_vertices is not None:  # the picture of GET /jobs/{id}/preview.png
-            t_preview = time.perf_counter()
-            note = _render_preview(result, path.with_suffix(".png"))
-            if note and report is not None:
-                report.warnings.append(note)
-            stage_times["preview"] = time.perf_counter() - t_preview
         summary = {
             "iterations": int(report.iterations) if report else None,
             "residual": float(report.residual) if report else None,

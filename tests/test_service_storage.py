@@ -19,7 +19,7 @@ import psutil
 import pytest
 from service_helpers import MESH, Server, cantilever, long_job, shared_cache_dir, worker_pid
 
-FSIZE = 64 * 1024  # the small job's result (~43 kB) fits, the 48-cell one's does not
+FSIZE = 256 * 1024  # the small job's result (157 kB with its viewer data) fits, the 48-cell one's (900 kB) does not
 
 
 def _limit_file_size(pid: int, limit: int) -> None:
@@ -106,7 +106,9 @@ def test_full_disk_refuses_up_front_and_fails_a_running_write_as_storage(small_d
         assert not any((small_disk / "jobs").iterdir())  # nothing stored for it
 
         # a job admitted while there was room, whose write then meets a full disk
-        blocker = srv.submit_ok(long_job(60))  # ~40 MB estimate: fits, keeps the one worker busy
+        # ~27 MB estimate (dense fields + the viewer files' copies of 9 levels): fits, and keeps the
+        # one worker busy in its solve for seconds, long enough to fill the disk behind it
+        blocker = srv.submit_ok(long_job(8))
         srv.wait_running(blocker)
         target = srv.submit_ok(cantilever(24))
         filler = small_disk / "filler"

@@ -53,7 +53,7 @@ def object_pixels(png: bytes) -> float:
 
 def test_preview_png_of_a_finished_job(server, finished):
     r = server.client.get(f"/jobs/{finished['id']}/preview.png")
-    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png", r.text
     assert r.content.startswith(b"\x89PNG")
     assert object_pixels(r.content) > 0.05
     assert finished["result"]["preview_url"] == f"/jobs/{finished['id']}/preview.png"
