@@ -211,8 +211,11 @@ def _view_dataset(group: h5py.Group, name: str, data: np.ndarray, units: str, lo
 
 
 def _whole_attribute(grid: ET.Element, ds: h5py.Dataset, h5_name: str, name: str, center: str, dim: int) -> None:
+    # VTK's XDMF reader takes a "Matrix" attribute as one value, and "Tensor6" in XDMF's own order
+    # (xx, xy, xz, yy, yz, zz) expanded to 9 components: a Voigt array goes as a "Vector", which VTK
+    # keeps as it is (6 or 3 components in the file's order xx, yy, zz, yz, xz, xy / xx, yy, xy)
     width = ds.shape[1] if ds.ndim > 1 else 1
-    kind = "Scalar" if width == 1 else ("Vector" if width == dim else "Matrix")
+    kind = "Scalar" if width == 1 else "Vector"
     attr = ET.SubElement(grid, "Attribute", Name=name, AttributeType=kind, Center=center)
     _hdf_item(attr, ds, h5_name)
 

@@ -70,6 +70,7 @@ def check_cells(centres: np.ndarray, cell_values: dict[str, np.ndarray], path: P
         assert len(hit) == 1, (index, centre)
         np.testing.assert_allclose(cell_values["displacement"][hit[0]], fields["displacement"][index], rtol=1e-12)
         np.testing.assert_allclose(cell_values["von_mises"][hit[0]], fields["von_mises"][index], rtol=1e-12)
+        np.testing.assert_allclose(cell_values["stress"][hit[0]], fields["stress"][index], rtol=1e-12)
         assert fields["von_mises"][index] > 0 and np.abs(fields["displacement"][index]).max() > 0
 
 
