@@ -1,9 +1,9 @@
 """Boundary conditions as both methods see them: what acts, on which surface patch, with which value.
 
 Every boundary acts on its *surface patch*: the part of the mesh surface inside its region,
-optionally only the facets facing a given way (DESIGN.md "Job spec"). A displacement boundary
-holds the solid's surface there, per component (``Prescribed``); traction and pressure act there
-(``SurfaceLoad``). This module turns a job spec (plus the Python API's callables) into those
+optionally only the facets facing a given way (``facing`` in schemas/json/job.schema.json). A
+displacement boundary holds the solid's surface there, per component (``Prescribed``); traction
+and pressure act there (``SurfaceLoad``). This module turns a job spec (plus the Python API's callables) into those
 objects (:func:`make_boundaries`), clips patches with errors that say what is wrong
 (:func:`select_patch`), integrates over them (:func:`surface_quadrature`) and evaluates tractions
 (:func:`tractions`). How a method turns a boundary into its own unknowns stays in the method.
@@ -263,10 +263,18 @@ def boundary_tractions(
     given = [k for k, v in (("traction", traction), ("pressure", pressure), ("stress", stress)) if v is not None]
     if len(given) != 1:
         raise ValueError(f"{name}: give exactly one of traction, pressure or stress, got {given or 'none'}")
+    points, weights, normals = patch_quadrature(surface, region, spacing, name=name)
+    return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
+
+
+def patch_quadrature(surface: Surface, region: Region, spacing: float, *,
+                     name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`surface_quadrature` at ``spacing`` [m] on the surface patch of ``region`` (a region
+    holding no surface is an error naming ``name``, :func:`select_patch`): points [Q, d] [m],
+    weights [Q] [m^2 | m], unit outward normals [Q, d]."""
     d = surface.dim
     pieces, _ = select_patch(region, surface.vertices[surface.faces], name)
-    points, weights, normals = surface_quadrature(pieces.reshape(-1, d, d), spacing)
-    return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
+    return surface_quadrature(pieces.reshape(-1, d, d), spacing)
 
 
 def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=None, pressure: float | None = None,

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import Prescribed, SurfaceLoad, boundary_tractions, hold_warnings
+from ..boundary import Prescribed, SurfaceLoad, hold_warnings, patch_quadrature, tractions
 from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
@@ -28,8 +28,8 @@ from ..output import FieldData
 from ..solvers.cg import SolveStats, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
-from .nitsche import hold_patches, make_surface_operator
 from .multigrid import Multigrid
+from .nitsche import hold_patches, make_surface_operator
 from .operator import MIN_FRACTION, Level, device_array, dof_bodies, make_fine_level, pairs
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
@@ -69,17 +69,23 @@ class StaggeredElasticity:
         # pieces up to h across (surface_quadrature halves its spacing): the surface loads' h / 2 made
         # 466k points on the bundled cantilever's clamp at resolution 128 (its thin strips split 4^6-fold)
         self.hold = self.patches.quadrature(2 * grid.spacing) if self.patches is not None else None
-        self._load_points = {
-            id(load): boundary_tractions(self.surface, load.region, grid.spacing, name=load.name,
-                                         traction=load.traction, pressure=load.pressure, stress=load.stress)
-            for load in self.surface_loads if load.form != "divergence"
-        }
-        # Ghost samples (make_fine_level) for the points where boundaries act, in 2D only: the annulus
-        # held on its circles needs them to converge; in 3D they changed no error on the clamped
-        # sphere but cost multigrid its convergence and gave dynamics an instant response (figures:
-        # docs/design-notes.md, "Boundaries on the surface patch")
-        acting = [pts for pts, _, _ in self._load_points.values()] + ([self.hold.points] if self.hold else [])
-        ghosts = sampling.stencil_samples(grid, np.concatenate(acting)) if acting and self.dim == 2 else None
+        self._load_points = {}
+        for load in self.surface_loads:
+            if load.form != "divergence":
+                x, w, n = patch_quadrature(self.surface, load.region, grid.spacing, name=load.name)
+                t = tractions(x, n, name=load.name, traction=load.traction, pressure=load.pressure, stress=load.stress)
+                self._load_points[id(load)] = (x, w, t, n)
+        # Ghost samples (engine/staggered/ghosts.py) beyond the surface where loads act, and where holds
+        # act in 2D only: the annulus held on its circles needs them to converge; in 3D they changed no
+        # error on the clamped sphere but cost multigrid its convergence (docs/design-notes.md,
+        # "Boundaries on the surface patch")
+        acting = [(x, n) for x, _, _, n in self._load_points.values()]
+        if self.hold is not None and self.dim == 2:
+            acting.append((self.hold.points, self.hold.normals))
+        ghosts = None
+        if acting:
+            points, normals = (np.concatenate(v) for v in zip(*acting))
+            ghosts = sampling.stencil_samples(grid, points, normals)
         self.level = level = make_fine_level(self.fractions, lam, mu, ghosts=ghosts)
         lay = level.layout
         self.index = lay.indices()  # [positions, d] global index of every kept position
@@ -140,7 +146,7 @@ class StaggeredElasticity:
             if load.form == "divergence":
                 f += self._divergence_load(load)
                 continue
-            pts, w, t = self._load_points[id(load)]
+            pts, w, t, _ = self._load_points[id(load)]
             spread = sampling.surface_loads(grid, pts, w, t, active, free=free, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)

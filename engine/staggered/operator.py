@@ -20,6 +20,7 @@ import taichi as ti
 
 from ..geometry.fractions import VolumeFractions
 from . import kernels
+from .ghosts import ghost_faces, ghost_inertia
 from .layout import TILE, TileLayout, dilate, make_layout, reorder
 
 
@@ -110,6 +111,7 @@ class Level:
         self.slivers = 0  # control volumes whose weight was raised to MIN_FRACTION
         self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
+        self.ghost_inertia = None  # [d, size] the mass fractions of ghost samples (ghosts.ghost_inertia)
         self.surface = None  # the Nitsche terms of displacement boundaries (nitsche.SurfaceOperator)
         self.hold = None  # their patches (nitsche.HoldPatches), for the coarser levels
         self.set_free(self.active)
@@ -129,10 +131,11 @@ class Level:
         self._dinv = None
 
     def set_shift(self, shift: float, density: float) -> None:
-        """A = K + shift M with M = rho h^d Vf (backward Euler: shift = 1 / dt^2)."""
+        """A = K + shift M with M = rho h^d (Vf + ghost inertia) (backward Euler: shift = 1 / dt^2)."""
         self.shift, self.density = float(shift), float(density)
         if self.mass is None and shift != 0.0:
-            self.mass = device_array(density * self.spacing**self.dim * self.vf_host, self.dtype)
+            inertia = self.vf_host if self.ghost_inertia is None else self.vf_host + self.ghost_inertia
+            self.mass = device_array(density * self.spacing**self.dim * inertia, self.dtype)
         self._dinv = None
 
     def set_surface(self, surface, hold) -> None:
@@ -477,7 +480,7 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     ``dtype``: its device float type (default the solve precision). ``ghosts``: per component a
     [k, d] samples outside the material that boundaries' surface points interpolate from
     (``sampling.stencil_samples``); those an edge holding material ties to the body join the
-    unknowns (:func:`_ghost_faces`)."""
+    unknowns (``ghosts.ghost_faces``), with the inertia of ``ghosts.ghost_inertia``."""
     grid = fractions.grid
     d = grid.dim
     box = tuple(n + 1 for n in grid.shape)
@@ -492,47 +495,13 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     vf[vf > 1.0 - ROUNDOFF] = 1.0
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
     vc, ve = _snap(vc), _snap(ve)
-    active = _ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else None
+    active = ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else None
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype, active)
+    if ghosts is not None:
+        level.ghost_inertia = ghost_inertia(level)
     level.slivers = slivers
     level.origin = tuple(float(o) for o in grid.origin)
     return level
-
-
-def _ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: list[np.ndarray]) -> np.ndarray:
-    """Active faces [d, size] bool: those beside material, and the ``candidates`` (per component a
-    [k, d] sample indices) that share an edge holding material (ve > 0) with three active samples.
-    Such a ghost sample lies outside the material but its edge's shear energy ties it to the
-    body, so it is determined by the discrete energy as it stands (its edge was only pruned for
-    want of the sample); a sample no edge ties stays out."""
-    d = layout.dim
-    found = np.zeros((d, layout.size), dtype=np.int32)
-    kernels.active_faces(d, layout.coords, layout.tile_map, np.ascontiguousarray(vc, dtype=np.float64), found)
-    active = found.astype(bool)
-    eye = np.eye(d, dtype=np.int64)
-
-    def on(a: int, index: np.ndarray) -> np.ndarray:
-        p = layout.positions(index)
-        return (p >= 0) & active[a, np.maximum(p, 0)]
-
-    extra = []
-    for a, cand in enumerate(candidates):
-        p = layout.positions(cand)
-        cand = cand[(p >= 0) & ~active[a, np.maximum(p, 0)]]
-        tied = np.zeros(len(cand), dtype=bool)
-        for q, pair in enumerate(pairs(d)):
-            if a not in pair:
-                continue
-            b = pair[1] if pair[0] == a else pair[0]
-            # edge (a, b) at E reads u_a(E), u_a(E - e_b), u_b(E), u_b(E - e_a): u_a(I) is read at E = I, I + e_b
-            for edge, other in ((cand, cand - eye[b]), (cand + eye[b], cand + eye[b])):
-                pe = layout.positions(edge)
-                held = (pe >= 0) & (ve[q, np.maximum(pe, 0)] > 0) & on(a, other) & on(b, edge) & on(b, edge - eye[a])
-                tied |= held
-        extra.append((a, layout.positions(cand[tied])))
-    for a, p in extra:
-        active[a, p] = True
-    return active
 
 
 def make_coarse_level(fine: Level) -> Level:

@@ -94,16 +94,23 @@ def _corner_weights(frac: np.ndarray) -> np.ndarray:
     return phi.reshape(n, 2**d)
 
 
-def stencil_samples(grid: Grid, points: np.ndarray) -> list[np.ndarray]:
-    """Per component a, the distinct samples [k, d] in the multilinear stencils of ``points``
-    [N, d] [m]: where samples must be active for the interpolation at those points to be the full
-    multilinear one."""
+def stencil_samples(grid: Grid, points: np.ndarray, normals: np.ndarray) -> list[np.ndarray]:
+    """Per component a, the distinct samples [k, d] beyond a surface that the multilinear
+    stencils of its ``points`` [N, d] [m] read: of each stencil, the corners on the outward side
+    along the dominant axis of the point's unit outward normal (``normals`` [N, d]). Where these
+    are active the interpolation across the surface is the full multilinear one; the corners
+    beside the point along the surface are left out (see ``ghosts``)."""
     d = grid.dim
+    corners = _corners(d)
+    axis = np.abs(normals).argmax(axis=1)
+    side = (normals[np.arange(len(axis)), axis] > 0).astype(np.int64)
     out = []
     for a in range(d):
         base, _ = _lattice(grid, points, a)
-        cells, _ = _unique_rows(base)
-        out.append(_unique_rows((cells[:, None, :] + _corners(d)[None]).reshape(-1, d))[0])
+        keys, _ = _unique_rows(np.column_stack([base, axis, side]))  # stencil cell, axis, outward side
+        near = keys[:, None, :d] + corners[None]  # [C, 2^d, d]
+        outward = corners[:, keys[:, d]].T == keys[:, d + 1][:, None]  # [C, 2^d]
+        out.append(_unique_rows(near[outward])[0])
     return out
 
 
