@@ -3,7 +3,7 @@
     .venv/bin/python -m benchmarks accuracy [--quick | --full] [--problems lame,annulus,ball]
         [--methods staggered,dg1,dg2,p1,p2] [--repeats 3] [--out docs/accuracy]
 
-Problems and probes: ``benchmarks.problems``. Methods: the staggered method, DG k = 1 and k = 2
+Problems and probes: ``verification.problems``. Methods: the staggered method, DG k = 1 and k = 2
 (IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
 scikit-fem P1 / P2 on gmsh meshes, pyamg CG) at several mesh sizes. Every run is a whole job in
 its own spawned process (geometry, discretisation, solve, fields at the probes; no geometry
@@ -56,7 +56,7 @@ LABELS = {"staggered": "voxelastic staggered", "dg1": "voxelastic DG k=1", "dg2"
 
 
 def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
-    from benchmarks.problems import problem
+    from verification.problems import problem
     from engine import simulate
     from engine.geometry.cache import GeometryCache
 
@@ -86,7 +86,7 @@ def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
 def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[], dict]) -> dict:
     """The record of one configuration: ``job()`` run twice in this process, the second (warm) run's
     errors and times, the first one's time as ``seconds_cold``."""
-    from benchmarks.problems import relative_l2
+    from verification.problems import relative_l2
 
     cold, warm = job(), job()
     u = np.asarray(warm.pop("displacement"))
@@ -101,7 +101,7 @@ def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[]
 
 def _peer(problem_name: str, method: str, h: float, queue) -> None:
     from benchmarks.peer import run_peer
-    from benchmarks.problems import problem
+    from verification.problems import problem
 
     # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py)
     order = int(method[1])

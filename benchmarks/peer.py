@@ -5,7 +5,7 @@ meshes of the true curved geometry (OpenCASCADE spheres / disks, boolean cut, un
 characteristic length h), solved with CG preconditioned by a pyamg smoothed-aggregation V-cycle
 that is given the rigid-body modes as near-null space ``B``, to ||b - A x|| < rtol ||b|| (the same
 relative criterion, and default 1e-10, as voxelastic's runs). The problems, exact solutions and
-probe points are those of :mod:`benchmarks.problems`:
+probe points are those of :mod:`verification.problems`:
 
 - ``lame``: shell 0.5 < r < 1 with the true radii (exact solution
   ``lame_problem(0.5, 1.0, p, E, nu, problem("lame").probes)``), traction -p n on the inner sphere
@@ -69,7 +69,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problems import BALL_CAP, Problem, lame_problem, problem, relative_l2, von_mises_of
+from verification.problems import BALL_CAP, Problem, lame_problem, problem, relative_l2, von_mises_of
 
 LOAD_ORDER_EXTRA = 2  # body force / traction quadrature: 2 * order + this (smooth sin / cos data)
 MAX_CG_ITERATIONS = 5000

@@ -1,4 +1,5 @@
-"""The 2D annulus manufactured solution of Dolny (2025) section 5.1, shared by tests and benchmarks.
+"""The 2D annulus manufactured solution of Dolny (2025) section 5.1 on the staggered method (the
+solution itself: :mod:`verification.problems`, shared with the accuracy benchmark).
 
 mu = lambda = 1, u = (cos 2pi x cos 2pi y, sin 2pi x sin 2pi y) (divergence-free), so the body force
 is b = -div sigma = 8 pi^2 u. Radii 0.325 / 0.8 in a domain of width 2 (h = 2 / N).
@@ -12,30 +13,12 @@ import numpy as np
 
 from engine.geometry.cache import GeometryCache
 from engine.pipeline import Functions, run
+from verification.problems import ANNULUS_RADII, circle
+from verification.problems import annulus_body_force as body_force
+from verification.problems import annulus_exact as exact
+from verification.problems import annulus_stress as exact_stress
 
-INNER, OUTER = 0.325, 0.8
-TWO_PI = 2 * np.pi
-
-
-def exact(x: np.ndarray) -> np.ndarray:
-    return np.stack([np.cos(TWO_PI * x[:, 0]) * np.cos(TWO_PI * x[:, 1]), np.sin(TWO_PI * x[:, 0]) * np.sin(TWO_PI * x[:, 1])], axis=1)
-
-
-def body_force(x: np.ndarray) -> np.ndarray:
-    return 2 * TWO_PI**2 * exact(x)
-
-
-def exact_stress(x: np.ndarray) -> np.ndarray:
-    """sigma [N, 2, 2]: eps_xy = 0 and tr eps = 0, so sigma = 2 eps = diag(-1, 1) 4 pi sin 2pi x cos 2pi y."""
-    s = 2 * TWO_PI * np.sin(TWO_PI * x[:, 0]) * np.cos(TWO_PI * x[:, 1])
-    out = np.zeros((len(x), 2, 2))
-    out[:, 0, 0], out[:, 1, 1] = -s, s
-    return out
-
-
-def circle(radius: float, n: int = 4096) -> list[list[float]]:
-    t = np.linspace(0, TWO_PI, n, endpoint=False)
-    return np.stack([radius * np.cos(t), radius * np.sin(t)], axis=1).tolist()
+INNER, OUTER = ANNULUS_RADII
 
 
 def material() -> dict:

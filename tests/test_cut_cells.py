@@ -11,7 +11,8 @@ samples h/2 inside).
 
 import numpy as np
 
-from benchmarks import stress as S
+from verification import parts as P
+from verification import stress as S
 
 CELLS = 8  # across the width W
 SIZE = S.Size("cut cells", staggered_cells=CELLS, dg_cells=4, dg_degree=2)
@@ -37,10 +38,10 @@ def test_a_tip_moved_through_its_cell_follows_beam_theory():
     to 1e-6); without ghost samples the load and the probe of a tip face past the middle of its cell
     read the samples up to h/2 inside."""
     h = S.cell_size("staggered", SIZE)
-    grid = S.offset_grid((round(S.LENGTH / h) + 1, CELLS, CELLS), h)
-    lengths = S.LENGTH + h * np.array([0.0, 1e-6, 0.25, 0.5, 0.75, 1 - 1e-6])
-    bars = [S.cantilever(length=L, origin=(0.0, S.WIDTH / 2, S.WIDTH / 2)) for L in lengths]
-    beam = [S.timoshenko_tip(S.TIP_TRACTION * S.WIDTH**2, L, S.WIDTH, S.E0, S.NU0) for L in lengths]
+    grid = P.offset_grid((round(P.LENGTH / h) + 1, CELLS, CELLS), h)
+    lengths = P.LENGTH + h * np.array([0.0, 1e-6, 0.25, 0.5, 0.75, 1 - 1e-6])
+    bars = [P.cantilever(length=L, origin=(0.0, P.WIDTH / 2, P.WIDTH / 2)) for L in lengths]
+    beam = [P.timoshenko_tip(P.TIP_TRACTION * P.WIDTH**2, L, P.WIDTH, P.E0, P.NU0) for L in lengths]
     ratio = tips(bars, grid) / beam
     assert spread(ratio) < 4e-3, ratio
 
@@ -51,5 +52,5 @@ def test_sixteen_sub_cell_offsets_move_the_tip_by_less_than_3_percent():
     cell layers along the load (their strain read at the cell centre stiffens bending; 4.55% over
     offsets along the load alone) and from a clamp face inside a cell (docs/benchmarks.md)."""
     h = S.cell_size("staggered", SIZE)
-    grid = S.offset_grid((round(S.LENGTH / h), CELLS, CELLS), h)
-    assert spread(tips([S.offset_bar(s, h) for s in S.OFFSETS], grid)) < 0.03
+    grid = P.offset_grid((round(P.LENGTH / h), CELLS, CELLS), h)
+    assert spread(tips([P.offset_bar(s, h) for s in P.OFFSETS], grid)) < 0.03

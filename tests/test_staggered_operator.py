@@ -468,8 +468,8 @@ def thin_walled_box(start, h=1 / 16):
     """The stress suite's hollow box, 6 h + 0.3 h wide and 8 h + 0.3 h tall, walls 0.3 h thick, on a
     pinned grid: walls inside one cell layer (``start`` 0.35: 0.35 h .. 0.65 h of it) or across a
     grid plane (0.85); base clamped (z < 0.6 h). Returns (level, fractions)."""
-    from benchmarks.stress import hollow_box
     from engine.grid import Grid
+    from verification.parts import hollow_box
 
     t = 0.3 * h
     mesh = hollow_box((6 * h + t, 6 * h + t, 8 * h + t), t)

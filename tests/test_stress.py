@@ -1,4 +1,4 @@
-"""The cheap cases of the numerical-stability stress suite (``benchmarks/stress.py``) as tests.
+"""The cheap cases of the numerical-stability stress suite (:mod:`verification.stress`) as tests.
 
     .venv/bin/python -m pytest -q tests/test_stress.py
 
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks import stress as S
+from verification import stress as S
 
 SIZE = S.QUICK
 METHODS = ["staggered", "dg"]
