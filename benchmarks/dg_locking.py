@@ -3,7 +3,7 @@
     .venv/bin/python -m benchmarks.dg_locking [--degree 2] [--h 0.125] [--nu 0.3,0.49,0.499,0.4999]
 
 The accuracy benchmark's ``lame`` geometry, probes and volume-equivalent radii
-(``benchmarks.problems``: icospheres of subdivision 6, a = 0.5, b = 1, 1,200 interior probes) with
+(``verification.problems``: icospheres of subdivision 6, a = 0.5, b = 1, 1,200 interior probes) with
 E = 1 Pa and an internal pressure of 1 Pa, free body (the rigid modes left free and removed).
 Prints one JSON line per nu: relative L2 error of u at the probes (against the closed form),
 its ratio to the first nu's, the penalty used, and the seconds of discretisation + solve.
@@ -21,7 +21,7 @@ def sphere_error(nu: float, degree: int, h: float) -> dict:
     """One free thick sphere: {"nu", "error_u", "eta", "seconds"}."""
     import numpy as np
 
-    from benchmarks.problems import _shell, lame_problem, problem, relative_l2
+    from verification.problems import _shell, lame_problem, problem, relative_l2
     from engine.boundary import SurfaceLoad
     from engine.dg.elasticity import DGElasticity
     from engine.geometry.slicing import slice_cells

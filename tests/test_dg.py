@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from benchmarks.problems import problem
 from engine.boundary import Prescribed, SurfaceLoad
 from engine.dg.elasticity import DGElasticity
 from engine.geometry.slicing import slice_cells
@@ -15,6 +14,7 @@ from engine.material import Material
 from engine.regions import Halfspaces
 from engine.runtime import init
 from tests.conftest import surface_of
+from verification.problems import problem
 
 init("cpu", "f64")
 EVERYWHERE = Halfspaces(np.zeros((0, 3)), np.zeros(0))

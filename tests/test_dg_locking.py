@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from benchmarks.problems import lame_problem, relative_l2
 from engine.boundary import Prescribed, SurfaceLoad
 from engine.dg.elasticity import DGElasticity
 from engine.material import Material
 from engine.regions import Ball, Halfspaces
 from tests.test_dg import sphere_cut
+from verification.problems import lame_problem, relative_l2
 
 NUS = (0.3, 0.49, 0.499, 0.4999)
 EVERYWHERE = Halfspaces(np.zeros((0, 3)), np.zeros(0))
