@@ -17,6 +17,7 @@ import shutil
 import sys
 import tempfile
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
@@ -79,6 +80,7 @@ def _admit(spec, base_dir: Path):
     (surface, grid). Raises the engine's errors (GeometryError, GridError) with their messages."""
     from .errors import GeometryError
     from .grid import make_grid
+    from .method import method_entry
     from .pipeline import Limits, load_geometry
 
     limits = Limits()
@@ -88,18 +90,19 @@ def _admit(spec, base_dir: Path):
     g = spec.grid
     grid = make_grid(*surface.bounds, cell_size=g.cell_size, resolution=g.resolution, padding=g.padding,
                      max_cells=limits.max_cells)
-    _check_memory(grid, spec.method.kind, getattr(spec.method, "degree", 1), limits)
+    entry = method_entry(spec.method.kind)
+    entry.check_dimension(spec.dimension)
+    _check_memory(grid, entry, spec.method, limits)
     return surface, grid
 
 
-def _check_memory(grid, method: str, degree: int, limits) -> None:
+def _check_memory(grid, entry, method_spec, limits) -> None:
     from .errors import GridError
-    from .pipeline import estimate_memory
 
-    need = estimate_memory(grid, method, degree)
+    need = entry.estimate_memory(grid, method_spec)
     if need > limits.max_memory_bytes:
         raise GridError(
-            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
+            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{entry.kind}', "
             f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB (VOXELASTIC_MAX_MEMORY_GB); increase "
             "the cell size or lower the resolution")
 
@@ -189,6 +192,7 @@ def cmd_voxelize(args) -> int:
     from .geometry.fractions import volume_fractions
     from .geometry.loading import load_surface
     from .grid import make_grid
+    from .method import METHODS
     from .output import write_result
     from .pipeline import Geometry, Limits, geometry_result
     from .runtime import init
@@ -204,7 +208,9 @@ def cmd_voxelize(args) -> int:
             return _error(f"{args.mesh}: {len(surface.faces)} facets exceed the limit of {limits.max_triangles}")
         grid = make_grid(*surface.bounds, cell_size=args.cell_size, resolution=args.resolution, padding=args.padding,
                          max_cells=limits.max_cells)
-        _check_memory(grid, "staggered", 1, limits)  # the staggered geometry stage is what runs here
+        # what runs here is the volume-fraction stage: the estimate of a method built on it
+        entry = next(m for m in METHODS.values() if m.geometry == "fractions")
+        _check_memory(grid, entry, None, limits)
         _check_room(args.output, grid.shape, [], vertices=len(surface.vertices))
         init("cpu", "f64")
         vf = volume_fractions(surface, grid)
@@ -273,12 +279,6 @@ def cmd_run(args) -> int:
     return 0
 
 
-def cmd_serve(args) -> int:
-    from service.server import serve  # lazily: the engine does not depend on the service
-
-    return serve(args.host, args.port, args.log_level)
-
-
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -308,11 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="recompute the cut-cell geometry")
     p.set_defaults(func=cmd_run)
 
-    p = sub.add_parser("serve", help="run the job service (REST API + workers); settings from VOXELASTIC_* variables")
-    p.add_argument("--host", help="bind address (default VOXELASTIC_HOST or 127.0.0.1)")
-    p.add_argument("--port", type=int, help="port (default VOXELASTIC_PORT or 8000)")
-    p.add_argument("--log-level", default="info", choices=("critical", "error", "warning", "info", "debug"))
-    p.set_defaults(func=cmd_serve)
+    # commands of installed packages (the service's `serve`): the engine imports none of them
+    for entry in entry_points(group="voxelastic.commands"):
+        entry.load()(sub)
     return ap
 
 

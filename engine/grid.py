@@ -8,6 +8,7 @@ normal ``a`` on the cell's low side, ``s = e_a + e_b`` the edge (3D) or node (2D
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -125,3 +126,9 @@ def make_grid(
     centre = 0.5 * (lower + upper)
     origin = centre - 0.5 * cell_size * cells
     return Grid(origin=tuple(float(o) for o in origin), spacing=float(cell_size), shape=tuple(int(n) for n in cells))
+
+
+def axis_pairs(d: int) -> tuple[tuple[int, int], ...]:
+    """The axis pairs (a, b), a < b, of a d-dimensional grid: (0, 1) in 2D; (0, 1), (0, 2), (1, 2)
+    in 3D (the order of the staggered method's shear strains and edge fractions)."""
+    return tuple(itertools.combinations(range(d), 2))

@@ -1,8 +1,9 @@
 """Job spec + mesh -> geometry -> grid -> cut-cell geometry -> (discretization -> solve) -> Result.
 
 The same function serves the CLI, the Python API (``engine.simulate``) and the service workers.
-Stages report through ``progress(stage, fraction, info)``. Both methods (staggered, DG) run end to
-end through the shared analysis drivers.
+Stages report through ``progress(stage, fraction, info)``. The method comes from the registry
+(``engine.method``): it names the cut-cell geometry it needs, estimates its memory and builds its
+discretization, which the shared analysis drivers run.
 """
 
 from __future__ import annotations
@@ -13,21 +14,26 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from schemas import JobSpec, parse_job
 
-from .errors import GeometryError, GridError, MethodUnavailableError
+from .errors import GeometryError, GridError
 from .geometry.cache import GeometryCache, cache_key, default_directory
-from .geometry.fractions import VolumeFractions, control_offsets, volume_fractions
+from .geometry.fractions import VolumeFractions, volume_fractions
 from .geometry.loading import load_surface
 from .geometry.polygon import polygon_surface
 from .geometry.surface import Surface
+from .analysis import Progress
 from .grid import Grid, make_grid
+from .method import Method, method_entry
 from .output import FieldData, Result, SolverReport
 
-Progress = Callable[[str, float, dict], None]
+if TYPE_CHECKING:
+    from .geometry.slicing import CutCells
+
 MeshInput = bytes | str | os.PathLike | None
 
 
@@ -51,7 +57,7 @@ class Geometry:
     surface: Surface
     grid: Grid
     fractions: VolumeFractions | None = None
-    cut_cells: object | None = None  # engine.geometry.slicing.CutCells for the DG method
+    cut_cells: CutCells | None = None
     warnings: list[str] = field(default_factory=list)
     stage_times: dict[str, float] = field(default_factory=dict)
     cache_hit: bool = False
@@ -61,24 +67,10 @@ def _quiet(stage: str, fraction: float, info: dict) -> None:
     pass
 
 
-def estimate_memory(grid: Grid, method: str, degree: int = 1) -> int:
-    """Upper estimate of a job's peak memory [bytes] from the grid alone (before any work).
-
-    staggered: per cell, the fractions of every control-volume kind plus ~12 solver vectors per
-    displacement component (CG + multigrid hierarchy). dg: per cell, 7 blocks (element + 6 faces) of
-    (d * basis)^2 doubles, times 4 for assembly copies, times the sparse Cholesky factor's fill, which
-    grows like the grid's side in 3D (nested dissection). Measured peaks on the sphere shell
-    (`python -m benchmarks scaling`, grids 18^3 / 26^3 / 34^3): k = 2 1.51 / 5.34 / 14.5 GiB, k = 1
-    0.48 / 1.11 / 2.60 GiB; this estimate is 1.0-1.4x those from 26^3 on (below, the process's own
-    ~0.3 GiB dominates; before the fill factor it was 0.5-0.8x).
-    """
-    d = grid.dim
-    cells = grid.num_cells
-    if method == "dg":
-        basis = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
-        fill = max(1.0, cells ** (1 / d) / 12) if d == 3 else 1.0
-        return int(cells * 7 * (d * basis) ** 2 * 8 * 4 * fill)
-    return cells * 8 * (len(control_offsets(d)) + 12 * d)
+def estimate_memory(grid: Grid, method_spec) -> int:
+    """Upper estimate of a job's peak memory [bytes] from the grid and the spec's ``method``
+    (before any work): the method's own estimate (``engine.method``)."""
+    return method_entry(method_spec.kind).estimate_memory(grid, method_spec)
 
 
 def read_mesh_input(spec: JobSpec, mesh: MeshInput, filename: str | None, base_dir: Path | None) -> tuple[bytes, str]:
@@ -135,8 +127,10 @@ def prepare_geometry(
     t = time.perf_counter()
     gs = spec.grid
     grid = make_grid(*surface.bounds, cell_size=gs.cell_size, resolution=gs.resolution, padding=gs.padding, max_cells=limits.max_cells)
-    method = spec.method.kind
-    need = estimate_memory(grid, method, getattr(spec.method, "degree", 1))
+    entry = method_entry(spec.method.kind)
+    entry.check_dimension(spec.dimension)
+    method = entry.kind
+    need = entry.estimate_memory(grid, spec.method)
     if need > limits.max_memory_bytes:
         raise GridError(
             f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
@@ -153,21 +147,25 @@ def prepare_geometry(
         "grid": grid.to_dict(),
     }
     geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
-    if method == "dg":
-        if spec.dimension != 3:
-            raise MethodUnavailableError("method.kind: the DG method is three-dimensional; use 'staggered' for dimension 2")
-        from .geometry.slicing import slice_cells
-
-        geo.cut_cells, geo.cache_hit = cache.get_or_compute(cache_key("slicing", identity, params), lambda: slice_cells(surface, grid))
-        geo.warnings += list(getattr(geo.cut_cells, "warnings", []))
-    else:
-        geo.fractions, geo.cache_hit = cache.get_or_compute(
-            cache_key("fractions", identity, params), lambda: volume_fractions(surface, grid)
-        )
-        geo.warnings += geo.fractions.warnings
+    cache_kind, compute = _GEOMETRY[entry.geometry]
+    value, geo.cache_hit = cache.get_or_compute(cache_key(cache_kind, identity, params), lambda: compute(surface, grid))
+    setattr(geo, entry.geometry, value)
+    geo.warnings += list(value.warnings)
     times["cut_cells"] = time.perf_counter() - t
     geo.stage_times = times
     progress("cut_cells", 0.3, {"cache_hit": geo.cache_hit})
+    return geo
+
+
+def compute_geometry(method_kind: str, surface: Surface, grid: Grid) -> Geometry:
+    """The cut-cell geometry that method ``method_kind`` needs on ``grid``, uncached (for studies
+    that pin their own grid; jobs go through :func:`prepare_geometry`)."""
+    entry = method_entry(method_kind)
+    _, compute = _GEOMETRY[entry.geometry]
+    geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
+    value = compute(surface, grid)
+    setattr(geo, entry.geometry, value)
+    geo.warnings += list(value.warnings)
     return geo
 
 
@@ -262,11 +260,19 @@ def run(
     return result
 
 
-def _discretize(spec: JobSpec, geo: Geometry, functions: Functions):
-    if spec.method.kind == "dg":
-        from .dg.problem import make_dg
+def _discretize(spec: JobSpec, geo: Geometry, functions: Functions) -> Method:
+    return method_entry(spec.method.kind).build(spec, geo, functions)
 
-        return make_dg(spec, geo, functions)
-    from .staggered.problem import make_staggered
 
-    return make_staggered(spec, geo, functions)
+def _slice_cells(surface: Surface, grid: Grid):
+    from .geometry.slicing import slice_cells  # only the methods on cut cells load the slicer
+
+    return slice_cells(surface, grid)
+
+
+# the cut-cell geometries a method may ask for (engine.method.MethodEntry.geometry): the cache's
+# name for each and how it is computed; the result goes to the Geometry attribute of that name
+_GEOMETRY: dict[str, tuple[str, Callable]] = {
+    "fractions": ("fractions", volume_fractions),
+    "cut_cells": ("slicing", _slice_cells),
+}

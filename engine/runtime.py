@@ -9,17 +9,14 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import io
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-# ti.init otherwise starts a thread that calls out to the internet for a version check.
-os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
-# Taichi prints a banner to stdout on import and init; stdout belongs to our CLI's output.
-os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+import numpy as np
+import taichi as ti  # engine/__init__.py has set Taichi's environment: no version check, no banner
 
-import taichi as ti  # noqa: E402
+from .geometry.cache import cache_root
 
 Arch = Literal["cpu", "cuda", "auto"]
 Precision = Literal["f64", "f32"]
@@ -38,10 +35,8 @@ _current: RuntimeInfo | None = None
 
 
 def default_cache_dir() -> Path:
-    base = os.environ.get("VOXELASTIC_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "voxelastic"
-    )
-    return Path(base) / "taichi"
+    """Taichi's offline kernel cache, under the engine's cache root."""
+    return cache_root() / "taichi"
 
 
 def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path | None = None) -> RuntimeInfo:
@@ -104,3 +99,31 @@ def ensure_initialized() -> RuntimeInfo:
     For library use (geometry without a job); jobs call :func:`init` with their settings first.
     """
     return _current if _current is not None else init("cpu", "f64")
+
+
+# ----------------------------------------------------------------------------- device arrays
+# The methods hold their device data in Taichi ndarrays made here, so a switch of Taichi build
+# touches this module and the kernel modules only.
+
+_TYPES = {np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32}
+
+
+def solve_float() -> type:
+    """The numpy float type of the solve precision (``solver.precision``)."""
+    return np.float64 if ensure_initialized().precision == "f64" else np.float32
+
+
+def device_zeros(shape: tuple[int, ...], dtype: type | None = None):
+    """A zero Taichi ndarray of ``shape`` in numpy type ``dtype`` (default the solve precision's)."""
+    return ti.ndarray(dtype=_TYPES[np.dtype(dtype or solve_float()).type], shape=tuple(shape))
+
+
+def device_array(values: np.ndarray, dtype: type | None = None):
+    """A Taichi ndarray holding ``values`` (float arrays in the solve precision unless ``dtype``)."""
+    values = np.asarray(values)
+    if dtype is None:
+        dtype = solve_float() if values.dtype.kind in "fb" else values.dtype
+    values = np.ascontiguousarray(values, dtype=dtype)
+    out = device_zeros(values.shape, values.dtype.type)
+    out.from_numpy(values)
+    return out

@@ -128,9 +128,14 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     from engine.geometry.inflate import InflateLimitError
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
+    from engine.method import method_entry
     from engine.pipeline import estimate_memory, load_geometry
 
     spec = parse_spec(spec_text)
+    try:
+        method_entry(spec.method.kind).check_dimension(spec.dimension)
+    except VoxelasticError as exc:
+        raise Rejected(422, [_engine_error(str(exc))]) from None
 
     uses_mesh = spec.geometry.mesh is not None
     suffix = ""
@@ -176,7 +181,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
                          max_cells=settings.max_cells)
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
-    need = estimate_memory(grid, spec.method.kind, getattr(spec.method, "degree", 1))
+    need = estimate_memory(grid, spec.method)
     limit = int(settings.max_job_memory_bytes)
     if need > limit:
         shape = "x".join(map(str, grid.shape))

@@ -53,9 +53,10 @@ def test_dg_memory_estimate_covers_the_measured_peaks_of_its_direct_solver(degre
     # Cholesky factor's fill grows with the grid's side, so a per-cell constant fell short (0.65-0.8x)
     from engine.grid import Grid
     from engine.pipeline import estimate_memory
+    from schemas.job import DGMethod
 
     for n, peak in zip((26, 34), peaks):
-        estimate = estimate_memory(Grid(origin=(0.0,) * 3, spacing=1.0, shape=(n,) * 3), "dg", degree) / 2**30
+        estimate = estimate_memory(Grid(origin=(0.0,) * 3, spacing=1.0, shape=(n,) * 3), DGMethod(degree=degree)) / 2**30
         assert peak <= estimate <= 2 * peak, (n, estimate, peak)
 
 
@@ -93,3 +94,13 @@ def test_run_staggered_and_dg_end_to_end():
     assert dg.method == "dg" and dg.solver.residual < 1e-9  # direct solve, measured 4.1e-10 on this grid
     assert dg.fields.surface["displacement"].shape == (len(dg.surface_vertices), 3)
     assert np.all(np.isfinite(dg.fields.surface["displacement"]))
+
+
+def test_the_engine_docstring_example_runs():
+    """engine/__init__.py's tiny job (its expected values are plane-strain elasticity's, by hand)."""
+    import doctest
+
+    import engine
+
+    failed, tried = doctest.testmod(engine, verbose=False)
+    assert tried >= 3 and failed == 0

@@ -11,15 +11,15 @@ import scipy.sparse.linalg as spla
 import trimesh
 
 from engine.geometry.fractions import volume_fractions
-from engine.grid import make_grid
-from engine.runtime import init
+from engine.grid import axis_pairs as pairs, make_grid
+from engine.runtime import device_array, init
 from engine.solvers.cg import pcg
 from engine.staggered import assembly
 from engine.staggered import kernels as kn
 from engine.staggered.layout import TILE
 from engine.staggered.multigrid import Multigrid
 from engine.staggered import multigrid
-from engine.staggered.operator import device_array, make_coarse_level, make_fine_level, pairs, weights
+from engine.staggered.operator import make_coarse_level, make_fine_level, weights
 from tests.conftest import polygon_surface_2d, surface_of
 
 LAM, MU = 1.3, 0.7

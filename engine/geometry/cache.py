@@ -32,11 +32,18 @@ def cache_key(kind: str, mesh_bytes: bytes, params: dict[str, Any]) -> str:
     return h.hexdigest()
 
 
-def default_directory() -> Path:
+def cache_root() -> Path:
+    """Where the engine keeps its caches: VOXELASTIC_CACHE_DIR, else $XDG_CACHE_HOME/voxelastic
+    (~/.cache/voxelastic)."""
     base = os.environ.get("VOXELASTIC_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "voxelastic"
     )
-    return Path(base) / "geometry"
+    return Path(base)
+
+
+def default_directory() -> Path:
+    """The geometry cache's directory under :func:`cache_root`."""
+    return cache_root() / "geometry"
 
 
 class GeometryCache:

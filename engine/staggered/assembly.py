@@ -21,7 +21,6 @@ a * prod(n + 1) + ravel_multi_index(I, n + 1). Samples of the box that fall outs
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import TYPE_CHECKING
 
@@ -31,7 +30,7 @@ import scipy.sparse as sp
 from ..solvers.rigid import rigid_modes  # noqa: F401  (re-exported: the reference's rigid motions)
 
 from ..errors import GridError
-from ..grid import Grid
+from ..grid import Grid, axis_pairs
 
 if TYPE_CHECKING:
     from ..geometry.fractions import VolumeFractions
@@ -102,7 +101,7 @@ def box_fractions(
 
     cell = dense(np.zeros(d, dtype=int), "cell fractions")
     faces = {a: dense(eye[a], f"face fractions {a}") for a in range(d)}
-    edges = {(a, b): dense(eye[a] + eye[b], f"edge fractions {a}{b}") for a, b in _pairs(d)}
+    edges = {(a, b): dense(eye[a] + eye[b], f"edge fractions {a}{b}") for a, b in list(axis_pairs(d))}
     return cell, faces, edges
 
 
@@ -132,7 +131,7 @@ def strain_operators(
     b_cell = _coo(parts, (d * P, d * P))
 
     b_edge = {}
-    for a, b in _pairs(d):
+    for a, b in list(axis_pairs(d)):
         parts = []
         for comp, other in ((a, b), (b, a)):
             parts.append((rows, comp * P + rows, np.full(P, 0.5 / h)))
@@ -208,10 +207,6 @@ def mass(face: dict[int, np.ndarray], spacing: float, density: float) -> np.ndar
     return density * float(spacing) ** d * np.concatenate([np.asarray(face[a], dtype=float).ravel() for a in range(d)])
 
 
-def _pairs(d: int) -> list[tuple[int, int]]:
-    return list(itertools.combinations(range(d), 2))
-
-
 def _box_indices(box: tuple[int, ...]) -> np.ndarray:
     """All indices [prod(box), d] of the box in C order."""
     return np.indices(box).reshape(len(box), -1).T.astype(np.int64)
@@ -257,8 +252,8 @@ def _check_weights(
     d = cell.ndim
     if d not in (2, 3) or min(cell.shape) < 2:
         raise ValueError(f"cell fractions: need a 2D or 3D index box (n + 1 >= 2 per axis), got shape {cell.shape}")
-    if sorted(edges) != _pairs(d):
-        raise ValueError(f"edge fractions: need exactly the pairs {_pairs(d)} (a < b), got {sorted(edges)}")
+    if sorted(edges) != list(axis_pairs(d)):
+        raise ValueError(f"edge fractions: need exactly the pairs {list(axis_pairs(d))} (a < b), got {sorted(edges)}")
     edges = {pair: np.asarray(v, dtype=float) for pair, v in edges.items()}
     for pair, v in edges.items():
         if v.shape != cell.shape:

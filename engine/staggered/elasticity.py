@@ -23,25 +23,19 @@ from ..boundary import Prescribed, SurfaceLoad, hold_warnings, patch_quadrature,
 from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
+from ..grid import axis_pairs
 from ..material import Material, stress, von_mises
+from ..method import State
 from ..output import FieldData
-from ..solvers.cg import SolveStats, SolverError, pcg
+from ..runtime import device_array
+from ..solvers.cg import SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
-from .operator import MIN_FRACTION, Level, device_array, dof_bodies, make_fine_level, pairs
+from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass
-class State:
-    """A solved displacement u [d, size] on the fine level (prescribed values included)."""
-
-    u: np.ndarray
-    stats: SolveStats
-    seconds: float
 
 
 @dataclass
@@ -184,7 +178,7 @@ class StaggeredElasticity:
         for a in range(d):
             s_aa = sig_c[..., a, a]
             f[a] += _shift(vc * s_aa, a) - vc * s_aa - vf[a] * (_shift(s_aa, a) - s_aa)
-        for q, (a, b) in enumerate(pairs(d)):
+        for q, (a, b) in enumerate(axis_pairs(d)):
             s_ab = sample(eye[a] + eye[b])[..., a, b]
             ve = lay.dense(level.ve_host[q])
             for i, j in ((a, b), (b, a)):
@@ -360,7 +354,7 @@ class StaggeredElasticity:
         eye = np.eye(d, dtype=int)
         normal = [(shifted(full[a], eye[a]) - full[a][cut]) / h for a in range(d)]
         shear = {}
-        for q, (a, b) in enumerate(pairs(d)):
+        for q, (a, b) in enumerate(axis_pairs(d)):
             ua, ub = full[a], full[b]
             edge = np.zeros_like(ua)
             edge[tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))] = 0.5 * (

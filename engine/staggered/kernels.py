@@ -19,9 +19,11 @@ import itertools
 
 import taichi as ti
 
+from ..grid import axis_pairs
+
 B = 8
 BITS = 3
-PAIRS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}
+PAIRS = {d: axis_pairs(d) for d in (2, 3)}  # compile-time tuples for ti.static
 
 
 @ti.func

@@ -20,12 +20,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ThinFeatureError
+from ..grid import axis_pairs
+from ..runtime import device_array
 from ..solvers.cg import SolverError
 from ..solvers.rigid import free_modes
 from . import assembly, kernels
 from .nitsche import make_surface_operator
-from .operator import (Level, Mechanisms, describe_thin_features, device_array, dof_bodies, make_coarse_level, pairs,
-                       unheld_groups)
+from .operator import Level, Mechanisms, describe_thin_features, dof_bodies, make_coarse_level, unheld_groups
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -227,7 +228,7 @@ class CoarseSolver:
         self.comp, self.pos = comp[free], flat_pos[free]
         gid = assembly.dof_index(comp, np.tile(idx, (d, 1)), cells)
         cell = lay.dense(level.vc_host)
-        edges = {p: lay.dense(level.ve_host[q]) for q, p in enumerate(pairs(d))}
+        edges = {p: lay.dense(level.ve_host[q]) for q, p in enumerate(axis_pairs(d))}
         K = assembly.stiffness(cell, edges, level.spacing, level.lam, level.mu).tocsr()
         order = gid[free]
         A = K[order][:, order]

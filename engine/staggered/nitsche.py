@@ -42,7 +42,8 @@ import scipy.sparse as sp
 from ..boundary import Prescribed, select_patch, surface_quadrature
 from ..errors import BoundaryError
 from ..geometry.surface import Surface
-from .operator import Level, pairs
+from ..grid import axis_pairs
+from .operator import Level
 from .sampling import _corner_weights, _corners, _unique_rows, renormalised
 
 TAU = 0.5  # a point's source cell is its own when that cell's fill reaches this
@@ -123,7 +124,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     """The Nitsche terms of ``quad`` on ``level`` (whose ``origin`` must be known)."""
     d, h, lay = level.dim, level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
-    nv = d + len(pairs(d))
+    nv = d + len(axis_pairs(d))
     lam, mu = level.lam, level.mu
     big = traction_bound(lam, mu, d)
     x, w = quad.points, quad.weights
@@ -141,7 +142,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     pen = []
     corners = _corners(d)
     k = len(corners)
-    voigt = {a: [(a, a)] + [(d + q, b if p == a else p) for q, (p, b) in enumerate(pairs(d)) if a in (p, b)]
+    voigt = {a: [(a, a)] + [(d + q, b if p == a else p) for q, (p, b) in enumerate(axis_pairs(d)) if a in (p, b)]
              for a in range(d)}
     for a in range(d):
         on = np.nonzero(quad.mask[:, a] > 0)[0]
@@ -266,7 +267,7 @@ def cell_fill(level: Level, cell: np.ndarray) -> np.ndarray:
     pos = lay.positions(cell)
     out = np.where(pos >= 0, level.vc_host[np.maximum(pos, 0)], 0.0)
     eye = np.eye(d, dtype=np.int64)
-    for q, (a, b) in enumerate(pairs(d)):
+    for q, (a, b) in enumerate(axis_pairs(d)):
         total = np.zeros(len(cell))
         for i, j in itertools.product((0, 1), repeat=2):
             p = lay.positions(cell + i * eye[a] + j * eye[b])
@@ -299,7 +300,7 @@ def _stress_rows(level: Level, cells: np.ndarray, nv: int) -> tuple[np.ndarray, 
             c = (lam + 2.0 * mu * (a == k)) / h
             add(s * nv + k, a, cells + eye[a], c * one)
             add(s * nv + k, a, cells, -c * one)
-    for q, (a, b) in enumerate(pairs(d)):  # sigma_ab = 2 mu eps_ab
+    for q, (a, b) in enumerate(axis_pairs(d)):  # sigma_ab = 2 mu eps_ab
         edges = [cells + i * eye[a] + j * eye[b] for i, j in itertools.product((0, 1), repeat=2)]
         weight = np.stack([np.where((p := lay.positions(e)) >= 0, level.ve_host[q, np.maximum(p, 0)], 0.0)
                            for e in edges], axis=1)

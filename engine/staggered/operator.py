@@ -16,9 +16,10 @@ import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
-import taichi as ti
 
 from ..geometry.fractions import VolumeFractions
+from ..grid import axis_pairs
+from ..runtime import device_array, device_zeros, solve_float
 from . import kernels
 from .ghosts import ghost_faces, ghost_inertia
 from .layout import TILE, TileLayout, dilate, make_layout, reorder
@@ -29,34 +30,6 @@ MIN_FRACTION = 1e-3
 # (8% of the shell's cells at 128^3). Read as cut, they would keep their tiles off the full-tile
 # path and put them in the multigrid's boundary band; within this of 1 a fraction is 1.
 ROUNDOFF = 1e-12
-
-
-def pairs(d: int) -> tuple[tuple[int, int], ...]:
-    """Axis pairs (a, b), a < b, of the shear strains, in the order of the ``ve`` rows."""
-    return kernels.PAIRS[d]
-
-
-def float_type() -> type:
-    """The numpy float type of the solve precision (``solver.precision``)."""
-    from ..runtime import ensure_initialized
-
-    return np.float64 if ensure_initialized().precision == "f64" else np.float32
-
-
-def taichi_float(dtype: type | None = None):
-    """The Taichi type of numpy float ``dtype`` (default: the solve precision's)."""
-    return ti.f64 if np.dtype(dtype or float_type()) == np.float64 else ti.f32
-
-
-def device_array(values: np.ndarray, dtype: type | None = None):
-    """A Taichi ndarray holding ``values`` (float arrays in the solve precision unless ``dtype``)."""
-    values = np.asarray(values)
-    if dtype is None:
-        dtype = float_type() if values.dtype.kind in "fb" else values.dtype
-    values = np.ascontiguousarray(values, dtype=dtype)
-    out = ti.ndarray(dtype={np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32}[np.dtype(dtype).type], shape=values.shape)
-    out.from_numpy(values)
-    return out
 
 
 @dataclass(frozen=True)
@@ -82,7 +55,7 @@ class Level:
         d = layout.dim
         self.layout, self.spacing, self.dim = layout, float(spacing), d
         self.lam, self.mu = float(lam), float(mu)
-        self.dtype = np.dtype(dtype or float_type()).type
+        self.dtype = np.dtype(dtype or solve_float()).type
         size, ts = layout.size, layout.tile_size
         vc = np.ascontiguousarray(vc, dtype=np.float64)
         ve = np.ascontiguousarray(ve, dtype=np.float64)
@@ -105,8 +78,8 @@ class Level:
             full &= np.all(v.reshape(len(v), -1, ts)[:, : layout.count] == 1.0, axis=(0, 2))
         self.full_tiles = int(full.sum())
         self.full = device_array(full.astype(np.int32))
-        self.sc = ti.ndarray(dtype=taichi_float(self.dtype), shape=(d, size))
-        self.se = ti.ndarray(dtype=taichi_float(self.dtype), shape=(len(pairs(d)), size))
+        self.sc = device_zeros((d, size), self.dtype)
+        self.se = device_zeros((len(axis_pairs(d)), size), self.dtype)
         self.shift, self.density = 0.0, 0.0
         self.slivers = 0  # control volumes whose weight was raised to MIN_FRACTION
         self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
@@ -122,7 +95,7 @@ class Level:
 
     def zeros(self):
         """A zero [d, size] array in the level's float type."""
-        return ti.ndarray(dtype=taichi_float(self.dtype), shape=(self.dim, self.size))
+        return device_zeros((self.dim, self.size), self.dtype)
 
     def set_free(self, free: np.ndarray) -> None:
         """free [d, size] bool: the unknowns (active and not prescribed)."""
@@ -152,8 +125,8 @@ class Level:
         self._ids = (device_array(surface.comp.astype(np.int32)), device_array(surface.pos.astype(np.int32)))
         self._csr = [(device_array(m.indptr.astype(np.int32)), device_array(m.indices.astype(np.int32)),
                       device_array(m.data, np.float64)) for m in (lower, upper)]
-        self._z = ti.ndarray(dtype=ti.f64, shape=(n + lower.shape[0],))
-        self._sx = ti.ndarray(dtype=ti.f64, shape=(n,))
+        self._z = device_zeros((n + lower.shape[0],), np.float64)
+        self._sx = device_zeros((n,), np.float64)
         self.extra = self.zeros()
         self._surface_count = n
 
@@ -280,10 +253,29 @@ def unheld_groups(level: Level) -> Mechanisms:
     vanishes), and the sets are disjoint: ``count`` is a lower bound of the null space's dimension
     beyond rigid motions, exact for the thin walls and rods described above. Cost: elementwise over
     the level's positions, graph work only on the weak runs (none in a part without thin features)."""
+    empty = np.zeros(0, dtype=np.int64)
+    comp, pos, run, total = _weak_runs(level)
+    if not total:
+        return Mechanisms(empty, empty, empty, empty, 0, 0.0)
+    entries = _run_terms(level, comp, pos, run)
+    group, run_sign, number, valid = _unheld_sets(entries, total)
+    dof = valid[group[run]]
+    return Mechanisms(comp[dof], pos[dof], number[group[run[dof]]], run_sign[run[dof]], int(valid.sum()),
+                      _fill(level, comp[dof], pos[dof]))
+
+
+def _shear_of(d: int) -> dict[int, list[tuple[int, int]]]:
+    """Per component a, the shear pairs reading it: (pair number q, the other axis b)."""
+    return {a: [(q, b if p0 == a else p0) for q, (p0, b) in enumerate(axis_pairs(d)) if a in (p0, b)] for a in range(d)}
+
+
+def _weak_runs(level: Level) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The runs of free samples (see :func:`unheld_groups`) touching at most WEAK_EDGES kept shear
+    terms and linked to no other sample: (comp [k], pos [k], run number [k] of each sample, runs)."""
     d, lay = level.dim, level.layout
     n = lay.count * lay.tile_size
     vc, ve, free = level.vc_host, level.ve_host, level.free
-    shear_of = {a: [(q, b if p0 == a else p0) for q, (p0, b) in enumerate(pairs(d)) if a in (p0, b)] for a in range(d)}
+    shear_of = _shear_of(d)
     comps, poss, runs = [], [], []
     total = 0
     for a in range(d):
@@ -318,16 +310,20 @@ def unheld_groups(level: Level) -> Mechanisms:
         comps.append(np.full(int(keep.sum()), a))
         poss.append(cpos[keep])
         runs.append(number[label[keep]])
-    empty = np.zeros(0, dtype=np.int64)
     if not total:
-        return Mechanisms(empty, empty, empty, empty, 0, 0.0)
-    comp, pos, run = np.concatenate(comps), np.concatenate(poss), np.concatenate(runs)
-    # the kept shear terms touching the weak runs, each once: (pair q, edge position e)
-    size = level.size
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty, 0
+    return np.concatenate(comps), np.concatenate(poss), np.concatenate(runs), total
+
+
+def _run_terms(level: Level, comp: np.ndarray, pos: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """The kept shear terms touching the weak runs, each once, as the run numbers [terms, 4] of the
+    samples they read (u_a(E), u_a(E - e_b), u_b(E), u_b(E - e_a)), -1 for every other sample."""
+    d, lay, ve, size = level.dim, level.layout, level.ve_host, level.size
     terms = []
-    for a in range(d):
+    for a, pairs_of_a in _shear_of(d).items():
         on = comp == a
-        for q, b in shear_of[a]:
+        for q, b in pairs_of_a:
             for e in (pos[on], lay.shifted(pos[on], b, 1)):
                 terms.append(q * size + e[ve[q, e] > 0])
     terms = np.unique(np.concatenate(terms))
@@ -341,11 +337,17 @@ def unheld_groups(level: Level) -> Mechanisms:
         return np.where(key[k] == c * size + p, run_by_key[k], -1)
 
     entries = []
-    for q, (qa, qb) in enumerate(pairs(d)):
+    for q, (qa, qb) in enumerate(axis_pairs(d)):
         e = e_of[q_of == q]
         entries.append(np.stack([run_at(qa, e), run_at(qa, lay.shifted(e, qb, -1)),
                                  run_at(qb, e), run_at(qb, lay.shifted(e, qa, -1))], axis=1))
-    entries = np.concatenate(entries)  # [terms, 4] run numbers, -1 for held samples
+    return np.concatenate(entries)
+
+
+def _unheld_sets(entries: np.ndarray, total: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """From the terms' run numbers ``entries`` [terms, 4] of ``total`` runs: each run's set
+    (group [total]), its sign relative to the set's first run, each set's number among the valid
+    ones, and which sets are valid (consistently signed and held by nothing) [sets]."""
     signs = np.array([1, -1, 1, -1])
     moving = entries >= 0
     c = moving.sum(axis=1)
@@ -372,10 +374,7 @@ def unheld_groups(level: Level) -> Mechanisms:
     first = np.full(m, total)
     np.minimum.at(first, group, np.arange(total))
     run_sign = np.where(copy[:total] == copy[first[group]], 1, -1)
-    number = np.cumsum(valid) - 1
-    dof = valid[group[run]]
-    return Mechanisms(comp[dof], pos[dof], number[group[run[dof]]], run_sign[run[dof]], int(valid.sum()),
-                      _fill(level, comp[dof], pos[dof]))
+    return group, run_sign, np.cumsum(valid) - 1, valid
 
 
 def _shift_up(lay: TileLayout, values: np.ndarray, axis: int) -> np.ndarray:
@@ -486,7 +485,7 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     box = tuple(n + 1 for n in grid.shape)
     cell_offset = (0,) * d
     unit = [tuple(int(k == a) for k in range(d)) for a in range(d)]
-    edge_offsets = [tuple(int(k in p) for k in range(d)) for p in pairs(d)]
+    edge_offsets = [tuple(int(k in p) for k in range(d)) for p in axis_pairs(d)]
     data_tiles = np.concatenate([fractions.control[s].coords for s in fractions.control])
     layout = make_layout(box, dilate(data_tiles, d))
     vc = layout.load(fractions.control[cell_offset])
@@ -512,7 +511,7 @@ def make_coarse_level(fine: Level) -> Level:
     box = tuple((n - 1 + 1) // 2 + 3 for n in fine.layout.box)  # ceil(cells / 2) + 2 cells (+ 1 index)
     layout = make_layout(box, dilate(fine.layout.coords // 2, d))
     vc = np.zeros(layout.size)
-    ve = np.zeros((len(pairs(d)), layout.size))
+    ve = np.zeros((len(axis_pairs(d)), layout.size))
     vf = np.zeros((d, layout.size))
     kernels.coarse_fractions(d, layout.coords, layout.tile_map, fine.layout.tile_map, fine.layout.count,
                              fine.vc_host, vc, ve, vf)

@@ -2,14 +2,30 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ..boundary import make_boundaries
 from ..errors import MethodUnavailableError
+from ..geometry.fractions import control_offsets
+from ..grid import Grid
 from ..material import Material
-from .elasticity import StaggeredElasticity
+
+if TYPE_CHECKING:
+    from .elasticity import StaggeredElasticity
+
+
+def estimate_memory(grid: Grid, method_spec=None) -> int:
+    """Upper estimate of a job's peak memory [bytes] from the grid alone: per cell, the fractions
+    of every control-volume kind plus ~12 solver vectors per displacement component (CG and the
+    multigrid hierarchy)."""
+    d = grid.dim
+    return grid.num_cells * 8 * (len(control_offsets(d)) + 12 * d)
 
 
 def make_staggered(spec, geo, functions) -> StaggeredElasticity:
     """The staggered discretization of a validated job on its prepared geometry."""
+    from .elasticity import StaggeredElasticity  # the method's modules load when a job builds it
+
     material = Material.from_spec(spec.material)
     if material.model != "linear":
         raise MethodUnavailableError(

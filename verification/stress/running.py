@@ -1,7 +1,7 @@
 """Running one job of the stress suite: the job spec, the pipeline's stages, the condition estimate.
 
-The stages are the pipeline's own (surface loading, grid, fractions / slicing, ``make_staggered``
-/ ``make_dg``, ``engine.analysis.run_analysis``), called one by one so that the method object
+The stages are the pipeline's own (surface loading, grid, ``pipeline.compute_geometry``, the method
+registry's builder, ``engine.analysis.run_analysis``), called one by one so that the method object
 stays available (condition estimate, per-step solver statistics) and the offset and thin-wall
 cases can pin the grid (``engine.pipeline.run`` centres the grid on the part).
 
@@ -115,13 +115,11 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
     """Run one job through the pipeline's stages (see the module docstring); ``grid``: a pinned
     ``engine.grid.Grid`` instead of the spec's centred one. Raises what the engine raises."""
     from engine.analysis import run_analysis
-    from engine.dg.problem import make_dg
-    from engine.geometry.fractions import volume_fractions
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
-    from engine.pipeline import Functions, Geometry
+    from engine.method import method_entry
+    from engine.pipeline import Functions, compute_geometry
     from engine.runtime import init
-    from engine.staggered.problem import make_staggered
     from schemas import parse_job
 
     parsed = parse_job(spec)
@@ -131,17 +129,8 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
     if grid is None:
         g = parsed.grid
         grid = make_grid(*surface.bounds, cell_size=g.cell_size, resolution=g.resolution, padding=g.padding)
-    geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
-    if parsed.method.kind == "dg":
-        from engine.geometry.slicing import slice_cells
-
-        geo.cut_cells = slice_cells(surface, grid)
-        geo.warnings += list(geo.cut_cells.warnings)
-        method = make_dg(parsed, geo, Functions())
-    else:
-        geo.fractions = volume_fractions(surface, grid)
-        geo.warnings += list(geo.fractions.warnings)
-        method = make_staggered(parsed, geo, Functions())
+    geo = compute_geometry(parsed.method.kind, surface, grid)
+    method = method_entry(parsed.method.kind).build(parsed, geo, Functions())
     stats: list = []
     inner = method.solve
 
@@ -173,7 +162,7 @@ def staggered_condition(m: Any, tol: float = 1e-3) -> float:
     modes are projected off."""
     import scipy.sparse.linalg as spla
 
-    from engine.staggered.operator import device_array
+    from engine.runtime import device_array
 
     if m.modes:
         return math.nan
