@@ -7,6 +7,8 @@ normal jump (``engine.dg.kernels.face_blocks``), k = 2 gave 4.5e-3 at nu 0.3 and
 the benchmark's finer icospheres (docs/benchmarks.md, "Near-incompressible materials").
 """
 
+import math
+
 import numpy as np
 import pytest
 import trimesh
@@ -94,3 +96,33 @@ def test_held_thick_sphere_does_not_lock_at_its_nitsche_boundaries(resolution, r
     stiff, soft = held_sphere_error(0.3, resolution), held_sphere_error(0.4999, resolution)
     assert stiff < 7e-3, stiff
     assert soft <= ratio * stiff, (stiff, soft)
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_face_projection_keeps_degree_below_k_and_shrinks_the_rest(degree):
+    """P (int_f Pi psi_I Pi psi_J) against M (int_f psi_I psi_J) on every interface of a cut sphere: equal
+    on fields of degree < k (Pi is the identity there), never above M on any field (Pi is an orthogonal
+    projection), and below it for zeta^k on the uncut faces along zeta (not in P_{k-1}(f) there)."""
+    from engine.dg.elements import make_elements
+    from engine.dg.integrals import face_products, make_basis
+
+    _, cut = sphere_cut(5)
+    el = make_elements(cut)
+    basis = make_basis(el, degree)
+    faces = np.arange(len(el.minus))
+    M, _, P = face_products(el, basis, faces)
+    gen = np.random.default_rng(3)
+    low = math.comb(degree + 2, 3)  # monomials of degree < k
+    for X, side in enumerate((el.minus, el.plus)):
+        L = basis.L[side]  # [F, s, I]: monomial s in the side's basis
+        c = np.einsum("fs,fsi->fi", gen.normal(size=(len(faces), low)), L[:, :low])
+        m = np.einsum("fi,fij,fj->f", c, M[:, X, X], c)
+        assert np.allclose(np.einsum("fi,fij,fj->f", c, P[:, X, X], c), m, rtol=1e-8, atol=1e-14 * m.max())
+        v = gen.normal(size=(len(faces), basis.size))
+        mv, pv = np.einsum("fi,fij,fj->f", v, M[:, X, X], v), np.einsum("fi,fij,fj->f", v, P[:, X, X], v)
+        assert np.all(pv <= mv * (1 + 1e-9) + 1e-14 * mv.max())
+        top = np.einsum("fi,fij,fj->f", L[:, -1], M[:, X, X], L[:, -1])  # the highest monomial (zeta^k)
+        ptop = np.einsum("fi,fij,fj->f", L[:, -1], P[:, X, X], L[:, -1])
+        # zeta^k varies along whole faces normal to x and y (on a sliver it may be nearly linear)
+        square = el.reference_faces & (el.axis != 2)
+        assert square.sum() > 10 and np.all(ptop[square] < 0.99 * top[square])
