@@ -85,8 +85,8 @@ def _record_method(record: dict) -> None:
 
     inner = pipeline._discretize
 
-    def discretize(spec, geo, functions):
-        method = inner(spec, geo, functions)
+    def discretize(spec, geo, functions, progress=None):
+        method = inner(spec, geo, functions, progress)
         solve = method.solve
 
         def timed_solve(*args, **kwargs):

@@ -140,7 +140,7 @@ class ProgressBar:
 
     @staticmethod
     def _detail(info: dict) -> str:
-        parts = []
+        parts = [info["part"]] if "part" in info else []
         if "step" in info and "steps" in info:
             parts.append(f"step {info['step']}/{info['steps']}")
         if "iterations" in info:

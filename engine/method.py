@@ -4,7 +4,7 @@ registry they find methods in.
 A method is a package under ``engine/`` providing
 
     estimate_memory(grid, method_spec) -> int     peak bytes, from the grid alone (before any work)
-    a builder (spec, geo, functions) -> Method    the discretization of a validated job
+    a builder (spec, geo, functions, progress) -> Method    the discretization of a validated job
 
 (imported only when a job asks for the method), and one :class:`MethodEntry` in :data:`METHODS`:
 the schema's ``method.kind``, the cut-cell geometry it discretizes (``"fractions"``: exact volume
@@ -28,6 +28,10 @@ from .solvers.cg import SolveStats
 
 if TYPE_CHECKING:
     from .grid import Grid
+
+
+# progress(part, share) of a method's setup: the part starting now and the share of the setup done
+Setup = Callable[[str, float], None]
 
 
 @dataclass
@@ -80,9 +84,10 @@ class MethodEntry:
         """Upper estimate of the job's peak memory [bytes] from the grid and the spec's ``method``."""
         return int(_load(self.memory)(grid, method_spec))
 
-    def build(self, spec: Any, geo: Any, functions: Any) -> Method:
-        """The method's discretization of the validated job ``spec`` on its prepared geometry."""
-        return _load(self.builder)(spec, geo, functions)
+    def build(self, spec: Any, geo: Any, functions: Any, progress: Setup | None = None) -> Method:
+        """The method's discretization of the validated job ``spec`` on its prepared geometry;
+        ``progress(part, share)`` hears of its parts as they start (share of the setup done, 0..1)."""
+        return _load(self.builder)(spec, geo, functions, progress=progress)
 
     def check_dimension(self, dimension: int) -> None:
         """A job of another dimension is an error naming the field and the methods that take it."""

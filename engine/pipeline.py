@@ -28,7 +28,7 @@ from .geometry.polygon import polygon_surface
 from .geometry.surface import Surface
 from .analysis import Progress
 from .grid import Grid, make_grid
-from .method import Method, method_entry
+from .method import Method, Setup, method_entry
 from .output import FieldData, Result, SolverReport
 
 if TYPE_CHECKING:
@@ -240,7 +240,11 @@ def run(
     times = dict(geo.stage_times)
     t = time.perf_counter()
     progress("discretization", 0.32, {})
-    method = _discretize(spec, geo, functions or Functions())
+
+    def setup(part: str, share: float) -> None:
+        progress("discretization", 0.32 + 0.08 * min(max(share, 0.0), 1.0), {"part": part})
+
+    method = _discretize(spec, geo, functions or Functions(), setup)
     times["discretization"] = time.perf_counter() - t
     t = time.perf_counter()
     outcome = run_analysis(method, spec.analysis, spec.output, progress)
@@ -260,8 +264,8 @@ def run(
     return result
 
 
-def _discretize(spec: JobSpec, geo: Geometry, functions: Functions) -> Method:
-    return method_entry(spec.method.kind).build(spec, geo, functions)
+def _discretize(spec: JobSpec, geo: Geometry, functions: Functions, progress: Setup | None = None) -> Method:
+    return method_entry(spec.method.kind).build(spec, geo, functions, progress)
 
 
 def _slice_cells(surface: Surface, grid: Grid):

@@ -53,3 +53,25 @@ def test_a_2d_dg_job_is_a_422_at_admission():
     assert caught.value.status_code == 422
     (error,) = caught.value.errors
     assert error["loc"] == ["body", "spec", "method", "kind"] and "dimension 3 only" in error["msg"]
+
+
+@pytest.mark.parametrize("kind", ["staggered", "dg"])
+def test_the_setup_reports_its_parts_in_order(kind):
+    """The discretization stage names its parts as they start, so a progress bar never sits on one
+    line for the whole setup (the service's bundled job stalled 8.9 s there before)."""
+    from engine.geometry.cache import GeometryCache
+    from engine.pipeline import run
+    from tests.test_cli_checks import EXAMPLE, STL
+
+    spec = json.loads(EXAMPLE.read_text())
+    spec["grid"] = {"resolution": 12, "padding": 1}
+    spec["method"] = {"kind": kind}
+    seen = []
+    run(spec, STL, cache=GeometryCache(None), progress=lambda stage, fraction, info: seen.append((stage, fraction, info)))
+    parts = [(f, i["part"]) for s, f, i in seen if s == "discretization" and "part" in i]
+    fractions = [f for s, f, _ in seen]
+    assert fractions == sorted(fractions)  # the bar only moves forward
+    names = [p for _, p in parts]
+    expected = {"staggered": ["surface quadrature", "operator", "boundaries", "multigrid smoothers and coarsest factor"],
+                "dg": ["elements and basis", "element integrals", "boundaries and loads", "assembly and factorisation"]}[kind]
+    assert [n for n in names if n in expected] == expected, names

@@ -24,6 +24,7 @@ from ..errors import BoundaryError, VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
 from ..material import Material, von_mises
+from ..method import Setup, State
 from ..output import FieldData
 from ..solvers.cg import SolveStats
 from ..solvers.direct import Cholesky, NotPositiveDefinite
@@ -56,16 +57,6 @@ COROTATED_MAX = 100
 
 
 @dataclass
-class State:
-    """Solved coefficients u [E, 3, n] (element, component, basis) and the solve's report."""
-
-    u: np.ndarray
-    stats: SolveStats
-    seconds: float
-    rotations: np.ndarray | None = None
-
-
-@dataclass
 class DGElasticity:
     """The DG method on one sliced geometry. ``loads`` are staggered-style ``SurfaceLoad`` objects
     (traction / pressure / stress on the surface inside a region); body_force [3] or callable [N/m^3]."""
@@ -81,6 +72,7 @@ class DGElasticity:
     body_force: np.ndarray | Callable | None = None
     merge_fraction: float = MERGE_FRACTION
     warnings: list[str] = field(default_factory=list)
+    progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
 
     def __post_init__(self) -> None:
         if self.degree not in (1, 2):
@@ -92,6 +84,8 @@ class DGElasticity:
                                   f"the slicing has {self.cut.degree}")
         if self.penalty is None:
             self.penalty = DEFAULT_PENALTY[self.degree]
+        say = self.progress or (lambda part, share: None)
+        say("elements and basis", 0.0)
         t = time.perf_counter()
         self.timings: dict[str, float] = {}
         self.elements: Elements = make_elements(self.cut, self.merge_fraction)
@@ -102,9 +96,11 @@ class DGElasticity:
         self.n = self.basis.size
         self.lam, self.mu = self.material.lame
         self.timings["basis"] = time.perf_counter() - t
+        say("element integrals", 0.2)
         t = time.perf_counter()
         self.element_blocks = assembly.element_blocks(self.elements, self.basis, self.mu, self.lam)
         self.timings["element_blocks"] = time.perf_counter() - t
+        say("boundaries and loads", 0.4)
         t = time.perf_counter()
         self.patches = self._dirichlet_patches()
         self.warnings += hold_warnings(self.prescribed, self.surface)
@@ -116,6 +112,7 @@ class DGElasticity:
         self.rotations: np.ndarray | None = None
         self.warp_load = None
         self._factor: Cholesky | None = None
+        say("assembly and factorisation", 0.6)
         self._build()
 
     # ------------------------------------------------------------------ setup

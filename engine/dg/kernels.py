@@ -3,8 +3,8 @@
 Inputs are scalar integrals of basis products already reduced from moments (``assembly``);
 these kernels apply the material law and the flux structure to them. A block of an element
 pair is [3 nb, 3 nb] with rows (component p, basis I) at p * nb + I. Loops over the three
-components are unrolled (``ti.static``), loops over basis functions are not (DESIGN.md: heavy
-unrolling compiles for minutes). All arrays are float64 whatever the runtime's default.
+components are unrolled (``ti.static``), loops over basis functions are not (unrolling them as
+well made the kernels compile for minutes). All arrays are float64 whatever the runtime's default.
 """
 
 import taichi as ti

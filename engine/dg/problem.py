@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 from ..boundary import make_boundaries
 from ..grid import Grid
 from ..material import Material
+from ..method import Setup
 
 if TYPE_CHECKING:
     from .elasticity import DGElasticity
@@ -25,7 +26,7 @@ def estimate_memory(grid: Grid, method_spec) -> int:
     return int(cells * 7 * (d * basis) ** 2 * 8 * 4 * fill)
 
 
-def make_dg(spec, geo, functions) -> DGElasticity:
+def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity:
     """The DG discretization of a validated job on its sliced geometry."""
     from .elasticity import DGElasticity  # the method's modules load when a job builds it
 
@@ -33,4 +34,5 @@ def make_dg(spec, geo, functions) -> DGElasticity:
     b = make_boundaries(spec, functions, material)
     m = spec.method
     return DGElasticity(cut=geo.cut_cells, surface=geo.surface, material=material, degree=m.degree, flux=m.flux,
-                        penalty=m.penalty, prescribed=b.prescribed, surface_loads=b.loads, body_force=b.body_force)
+                        penalty=m.penalty, prescribed=b.prescribed, surface_loads=b.loads, body_force=b.body_force,
+                        progress=progress)

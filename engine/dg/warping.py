@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from ..errors import VoxelasticError
+from ..method import State
 from ..solvers.cg import SolveStats
 from . import basis as B
 from . import kernels
@@ -109,7 +110,7 @@ DIVERGED_AFTER = 5
 
 def solve_corotated(method, load_scale: float, value_scale: float, inertia, on_iteration, t0: float):
     """Fixed point of rotations and displacement; iterations = linear solves."""
-    from .elasticity import COROTATED_MAX, COROTATED_TOL, State
+    from .elasticity import COROTATED_MAX, COROTATED_TOL
 
     u = getattr(method, "_last_u", None)
     u = np.zeros((method.elements.count, 3, method.n)) if u is None else u

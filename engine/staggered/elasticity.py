@@ -25,7 +25,7 @@ from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
 from ..material import Material, stress, von_mises
-from ..method import State
+from ..method import Setup, State
 from ..output import FieldData
 from ..runtime import device_array
 from ..solvers.cg import SolverError, pcg
@@ -54,8 +54,11 @@ class StaggeredElasticity:
     rtol: float = 1e-8
     max_iterations: int = 5000
     warnings: list[str] = field(default_factory=list)
+    progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
 
     def __post_init__(self) -> None:
+        say = self.progress or (lambda part, share: None)
+        say("surface quadrature", 0.0)
         grid = self.fractions.grid
         self.grid, self.dim = grid, grid.dim
         lam, mu = self.material.lame
@@ -80,6 +83,7 @@ class StaggeredElasticity:
         if acting:
             points, normals = (np.concatenate(v) for v in zip(*acting))
             ghosts = sampling.stencil_samples(grid, points, normals)
+        say("operator", 0.1)
         self.level = level = make_fine_level(self.fractions, lam, mu, ghosts=ghosts)
         lay = level.layout
         self.index = lay.indices()  # [positions, d] global index of every kept position
@@ -95,6 +99,7 @@ class StaggeredElasticity:
         points += np.asarray(grid.origin, dtype=np.float64)
         self.dof_points = points
         # displacement boundaries act on their surface patches, weakly (Nitsche): every active DOF is free
+        say("boundaries", 0.3)
         self.surface_terms = make_surface_operator(level, self.hold) if self.hold is not None else None
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += hold_warnings(self.prescribed, self.surface)
@@ -115,7 +120,7 @@ class StaggeredElasticity:
                 f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
                 f"weight was raised to {MIN_FRACTION:g} (bounds the conditioning; adds at most that share of a cell's energy)"
             )
-        self.multigrid = Multigrid(level)
+        self.multigrid = Multigrid(level, progress=lambda part, share: say(part, 0.5 + 0.5 * share))
         self.space = _Space(level)
 
     # ------------------------------------------------------------------ setup

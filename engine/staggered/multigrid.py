@@ -20,6 +20,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ThinFeatureError
+from ..method import Setup
 from ..grid import axis_pairs
 from ..runtime import device_array
 from ..solvers.cg import SolverError
@@ -64,9 +65,11 @@ class Multigrid:
     """V-cycle preconditioner on ``levels`` (finest first). Call :meth:`update` after the fine
     level's free DOFs or shift change."""
 
-    def __init__(self, fine: Level, *, max_levels: int = 12) -> None:
+    def __init__(self, fine: Level, *, max_levels: int = 12, progress: Setup | None = None) -> None:
+        say = progress or (lambda part, share: None)
         self.levels = [fine]
         while len(self.levels) < max_levels:
+            say(f"multigrid level {len(self.levels) + 1}", 0.4 * len(self.levels) / max_levels)
             last = self.levels[-1]
             if int(last.active.sum()) <= COARSEST_DOFS or max(last.layout.box) <= 5:
                 break
@@ -83,6 +86,7 @@ class Multigrid:
         # per level: the residual (which is also the Chebyshev step), and the rhs / solution it
         # receives from the level above (the finest level's come from the caller)
         self.work = [tuple(lv.zeros() for _ in range(3 if k else 1)) for k, lv in enumerate(self.levels)]
+        say("multigrid smoothers and coarsest factor", 0.5)  # the first job in a process compiles kernels here
         self.update()
 
     def update(self) -> None:

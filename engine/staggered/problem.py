@@ -9,6 +9,7 @@ from ..errors import MethodUnavailableError
 from ..geometry.fractions import control_offsets
 from ..grid import Grid
 from ..material import Material
+from ..method import Setup
 
 if TYPE_CHECKING:
     from .elasticity import StaggeredElasticity
@@ -22,7 +23,7 @@ def estimate_memory(grid: Grid, method_spec=None) -> int:
     return grid.num_cells * 8 * (len(control_offsets(d)) + 12 * d)
 
 
-def make_staggered(spec, geo, functions) -> StaggeredElasticity:
+def make_staggered(spec, geo, functions, progress: Setup | None = None) -> StaggeredElasticity:
     """The staggered discretization of a validated job on its prepared geometry."""
     from .elasticity import StaggeredElasticity  # the method's modules load when a job builds it
 
@@ -42,4 +43,5 @@ def make_staggered(spec, geo, functions) -> StaggeredElasticity:
         body_force=b.body_force,
         rtol=spec.solver.rtol,
         max_iterations=spec.solver.max_iterations,
+        progress=progress,
     )
