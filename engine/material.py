@@ -11,6 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# The output fields that come from the strain: computed together where any is asked for
+STRESS_FIELDS = ("strain", "stress", "von_mises", "pressure")
+
 
 def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
     """(lambda, mu) [Pa] from E [Pa] and nu [-] (0 <= nu < 0.5)."""
@@ -48,20 +51,29 @@ def stress(strain: np.ndarray, lam: float, mu: float, dim: int) -> np.ndarray:
     return out
 
 
-def von_mises(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | None = None) -> np.ndarray:
-    """von Mises stress [...] [Pa] of Voigt stresses [..., 6 | 3].
-
-    2D (plane strain) needs sigma_zz = nu (sigma_xx + sigma_yy) = lambda / (2 (lambda + mu)) (sxx + syy),
-    hence ``lam`` and ``mu``.
-    """
+def normal_stresses(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | None = None) -> np.ndarray:
+    """The three normal stresses [..., 3] [Pa] of Voigt stresses [..., 6 | 3]. 2D is plane strain:
+    sigma_zz = nu (sigma_xx + sigma_yy) = lambda / (2 (lambda + mu)) (sxx + syy), hence ``lam``
+    and ``mu``."""
     sigma = np.asarray(sigma, dtype=float)
     if dim == 3:
-        normal = sigma[..., :3]
-    else:
-        if lam is None or mu is None:
-            raise ValueError("von_mises: plane strain needs lam and mu for sigma_zz")
-        szz = lam / (2 * (lam + mu)) * (sigma[..., 0] + sigma[..., 1])
-        normal = np.concatenate([sigma[..., :2], szz[..., None]], axis=-1)
+        return sigma[..., :3]
+    if lam is None or mu is None:
+        raise ValueError("plane strain needs lam and mu for sigma_zz")
+    szz = lam / (2 * (lam + mu)) * (sigma[..., 0] + sigma[..., 1])
+    return np.concatenate([sigma[..., :2], szz[..., None]], axis=-1)
+
+
+def von_mises(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | None = None) -> np.ndarray:
+    """von Mises stress [...] [Pa] of Voigt stresses [..., 6 | 3] (2D: plane strain, see
+    :func:`normal_stresses`)."""
+    normal = normal_stresses(sigma, dim, lam, mu)
     dev = normal - normal.mean(axis=-1, keepdims=True)
-    shear = sigma[..., _shear_slice(dim)]
+    shear = np.asarray(sigma, dtype=float)[..., _shear_slice(dim)]
     return np.sqrt(1.5 * (dev**2).sum(axis=-1) + 3 * (shear**2).sum(axis=-1))
+
+
+def pressure(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | None = None) -> np.ndarray:
+    """Pressure p = -tr(sigma) / 3 [...] [Pa] of Voigt stresses [..., 6 | 3], positive in
+    compression (2D: plane strain's sigma_zz included, see :func:`normal_stresses`)."""
+    return -normal_stresses(sigma, dim, lam, mu).mean(axis=-1)

@@ -45,6 +45,7 @@ FIELDS: dict[str, FieldKind] = {
     "strain": FieldKind("1", "voigt"),
     "stress": FieldKind("Pa", "voigt"),
     "von_mises": FieldKind("Pa", "scalar"),
+    "pressure": FieldKind("Pa", "scalar"),  # -tr(sigma) / 3, positive in compression
 }
 
 # Cell arrays are chunked to about this many bytes and gzip-compressed (shuffle helps floats).

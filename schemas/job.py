@@ -292,7 +292,7 @@ class SolverSpec(SpecModel):
     arch: Literal["cpu", "cuda", "auto"] = Field("auto", description="Taichi backend; auto = CUDA if present.")
 
 
-FieldName = Literal["displacement", "strain", "stress", "von_mises"]
+FieldName = Literal["displacement", "strain", "stress", "von_mises", "pressure"]
 
 
 class OutputSpec(SpecModel):
