@@ -232,6 +232,57 @@ def _box_cells(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return lo[box] + np.stack([k // (ey * ez), (k // ez) % ey, k % ez], axis=1)
 
 
+@dataclass
+class _Rows:
+    """The sides of grid faces, one row each: an edge-connected component of a cut piece's
+    triangles in a grid face, or one face of a full cell.
+
+    piece, axis, side (0: the piece lies below the face, normal +e_axis), comp (the component, -1
+    for a full cell's face) [R]; low [R, 3]: the cell below the face; key [R]: the face as axis *
+    cells + the low cell's index, a distinct negative number on the grid's outer faces (never
+    paired). comp_piece [C], comp_moments [C, n]: each component's piece and area moments about
+    its low cell's centre; tri_comp [T], tri_xyz [T, 3, 3] [m]: the components' triangles;
+    ref_face [3, n]: the moments of a whole face normal to each axis.
+    """
+
+    piece: np.ndarray
+    axis: np.ndarray
+    side: np.ndarray
+    comp: np.ndarray
+    low: np.ndarray
+    key: np.ndarray
+    comp_piece: np.ndarray
+    comp_moments: np.ndarray
+    tri_comp: np.ndarray
+    tri_xyz: np.ndarray
+    ref_face: np.ndarray
+
+    def moments(self, r: np.ndarray) -> np.ndarray:
+        """Area moments [len(r), n] of rows ``r`` about their low cell's centre."""
+        m = np.empty((len(r), self.ref_face.shape[1]))
+        m[self.comp[r] >= 0] = self.comp_moments[self.comp[r][self.comp[r] >= 0]]
+        m[self.comp[r] < 0] = self.ref_face[self.axis[r][self.comp[r] < 0]]
+        return m
+
+    def region(self, grid: Grid, r: int, centre: np.ndarray) -> np.ndarray | None:
+        """Row ``r``'s triangles in xi about ``centre`` [3] [m]; None for a whole face of a full cell."""
+        return None if self.comp[r] < 0 else (self.tri_xyz[self.tri_comp == self.comp[r]] - centre) / grid.spacing
+
+
+@dataclass
+class _Groups:
+    """Rows grouped by face: ``order`` sorts rows by (key, side); group g is
+    order[starts[g]:starts[g] + counts[g]], of which n_low[g] lie below the face."""
+
+    order: np.ndarray
+    starts: np.ndarray
+    counts: np.ndarray
+    n_low: np.ndarray
+
+    def rows(self, g: int) -> np.ndarray:
+        return self.order[self.starts[g]:self.starts[g] + self.counts[g]]
+
+
 def _faces(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, cat: dict, cut_rank: np.ndarray,
            stats: dict) -> tuple[dict, dict]:
     """Pair the two sides of every grid face into interfaces; collect the surface triangles.
@@ -242,7 +293,23 @@ def _faces(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, ca
     cell. Rows are grouped by face; the low side (L, normal +e_axis) and high side (H) of a group
     are paired by their area moments.
     """
-    n_mon = monomial_exponents(3, degree).shape[0]
+    rows = _face_rows(grid, degree, piece_cell, full, cat, cut_rank)
+    groups = _group(rows)
+    found: list[tuple] = []  # interfaces (minus [k], plus [k], axis [k], moments [k, n])
+    surface: list[tuple] = []  # boundary (piece [k], triangles [k, 3, 3])
+    settled = _pair_bulk(rows, groups, found)
+    lonely = (groups.n_low == 0) | (groups.n_low == groups.counts)
+    _one_sided(grid, rows, groups, lonely, cat, cut_rank, surface)
+    settled |= lonely
+    stats["faces_resolved_2d"] = 0
+    for g in np.flatnonzero(~settled):
+        stats["faces_resolved_2d"] += _settle(grid, degree, rows, groups.rows(g), found, surface)
+    return _collect(grid, found, surface, rows.ref_face.shape[1])
+
+
+def _face_rows(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, cat: dict,
+               cut_rank: np.ndarray) -> _Rows:
+    """The rows of every grid face's sides: the digests' plane components, then six faces per full cell."""
     ref_face = cell_face_moments(degree)
     # Components ordered by piece, then first triangle (a piece's triangles all lie in one digest,
     # in their order there, so the final stable sort by piece orders them as one list would).
@@ -251,7 +318,6 @@ def _faces(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, ca
     renumber = np.empty_like(corder)
     renumber[corder] = np.arange(len(corder))
     comp_piece, comp_kind = comp_piece[corder], cat["comp_kind"][corder]
-    comp, plane_xyz = renumber[cat["plane_comp"]], cat["plane_xyz"]
     n_comp = len(comp_piece)
     comp_axis, comp_side = comp_kind // 2, 1 - comp_kind % 2  # side 0: the piece is below the face
     # Face moments about the low cell's centre: xi_low = xi_piece + e_axis for pieces above.
@@ -263,7 +329,7 @@ def _faces(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, ca
     piece = np.concatenate([comp_piece, np.repeat(fp, 6)])
     axis = np.concatenate([comp_axis, f_axis])
     side = np.concatenate([comp_side, np.tile(np.repeat([0, 1], 3), len(fp))])
-    rcomp = np.concatenate([np.arange(n_comp), np.full(6 * len(fp), -1)])
+    comp = np.concatenate([np.arange(n_comp), np.full(6 * len(fp), -1)])
     low = piece_cell[piece].copy()
     low[np.arange(len(low)), axis] -= side
     high = low.copy()
@@ -271,59 +337,74 @@ def _faces(grid: Grid, degree: int, piece_cell: np.ndarray, full: np.ndarray, ca
     inside = np.all(low >= 0, axis=1) & np.all(high < np.asarray(grid.shape), axis=1)
     key = axis * grid.num_cells + np.ravel_multi_index(tuple(np.clip(low, 0, np.asarray(grid.shape) - 1).T), grid.shape)
     key = np.where(inside, key, -1 - np.arange(len(key)))  # the grid's outer faces are never paired
+    return _Rows(piece, axis, side, comp, low, key, comp_piece, comp_moments, renumber[cat["plane_comp"]],
+                 cat["plane_xyz"], ref_face)
 
-    def moments_of(r: np.ndarray) -> np.ndarray:
-        m = np.empty((len(r), n_mon))
-        m[rcomp[r] >= 0] = comp_moments[rcomp[r][rcomp[r] >= 0]]
-        m[rcomp[r] < 0] = ref_face[axis[r][rcomp[r] < 0]]
-        return m
 
+def _group(rows: _Rows) -> _Groups:
+    """Rows sorted by face, low side first, with each face's extent and count of low rows."""
+    key, side = rows.key, rows.side
     order = np.lexsort((side, key))
     starts = np.flatnonzero(np.r_[True, key[order][1:] != key[order][:-1]]) if len(key) else np.zeros(0, int)
     counts = np.diff(np.r_[starts, len(key)])
     n_low = np.add.reduceat((side[order] == 0).astype(np.int64), starts) if len(starts) else np.zeros(0, int)
-    found: list[tuple] = []  # interfaces (minus [k], plus [k], axis [k], moments [k, n])
-    surface: list[tuple] = []  # boundary (piece [k], triangles [k, 3, 3])
-    # The bulk: one row per side with equal moments (full-full faces and generic cuts).
-    pair = np.flatnonzero((counts == 2) & (n_low == 1))
-    r0, r1 = order[starts[pair]], order[starts[pair] + 1]
-    cut = (rcomp[r0] >= 0) & (rcomp[r1] >= 0)  # a full side makes a whole face: only these need checking
-    half = (rcomp[r0] >= 0) != (rcomp[r1] >= 0)
+    return _Groups(order, starts, counts, n_low)
+
+
+def _pair_bulk(rows: _Rows, groups: _Groups, found: list) -> np.ndarray:
+    """The bulk: faces with one row per side and equal moments (full-full faces and generic cuts)
+    become interfaces (appended to ``found``); returns which groups [G] that settled."""
+    pair = np.flatnonzero((groups.counts == 2) & (groups.n_low == 1))
+    r0, r1 = groups.order[groups.starts[pair]], groups.order[groups.starts[pair] + 1]
+    comp = rows.comp
+    cut = (comp[r0] >= 0) & (comp[r1] >= 0)  # a full side makes a whole face: only these need checking
+    half = (comp[r0] >= 0) != (comp[r1] >= 0)
     ok = np.ones(len(pair), dtype=bool)
-    m0, m1 = comp_moments[rcomp[r0[cut]]], comp_moments[rcomp[r1[cut]]]
+    m0, m1 = rows.comp_moments[comp[r0[cut]]], rows.comp_moments[comp[r1[cut]]]
     ok[cut] = np.max(np.abs(m0 - m1), axis=1) <= _MATCH_TOL
-    ok[half] = np.max(np.abs(moments_of(r0[half]) - moments_of(r1[half])), axis=1) <= _MATCH_TOL
-    f_mom = ref_face[axis[r0]]
+    ok[half] = np.max(np.abs(rows.moments(r0[half]) - rows.moments(r1[half])), axis=1) <= _MATCH_TOL
+    f_mom = rows.ref_face[rows.axis[r0]]
     f_mom[cut] = 0.5 * (m0 + m1)
-    found.append((piece[r0[ok]], piece[r1[ok]], axis[r0[ok]], f_mom[ok]))
-    # One-sided groups (a surface lying in a grid plane, the grid's outer faces): all surface.
-    lonely = (n_low == 0) | (n_low == counts)
-    alone = order[np.repeat(lonely, counts)]
-    surface.append((cut_rank[cat["surf_piece"]], cat["surf_xyz"]))
-    in_alone = np.isin(comp, rcomp[alone][rcomp[alone] >= 0])
-    surface.append((comp_piece[comp[in_alone]], plane_xyz[in_alone]))
-    whole = alone[rcomp[alone] < 0]
-    surface.append((np.repeat(piece[whole], 2), _squares(grid, low[whole], axis[whole], side[whole])))
-    # The rest: several pieces meet at a face, or its two sides differ (surface in the plane).
-    settled = lonely.copy()
+    found.append((rows.piece[r0[ok]], rows.piece[r1[ok]], rows.axis[r0[ok]], f_mom[ok]))
+    settled = np.zeros(len(groups.starts), dtype=bool)
     settled[pair[ok]] = True
-    stats["faces_resolved_2d"] = 0
+    return settled
+
+
+def _one_sided(grid: Grid, rows: _Rows, groups: _Groups, lonely: np.ndarray, cat: dict, cut_rank: np.ndarray,
+               surface: list) -> None:
+    """Surface triangles: the pieces' own (not in a grid plane), then the one-sided groups ``lonely``
+    [G] (a surface lying in a grid plane, the grid's outer faces), all appended to ``surface``."""
+    alone = groups.order[np.repeat(lonely, groups.counts)]
+    surface.append((cut_rank[cat["surf_piece"]], cat["surf_xyz"]))
+    in_alone = np.isin(rows.tri_comp, rows.comp[alone][rows.comp[alone] >= 0])
+    surface.append((rows.comp_piece[rows.tri_comp[in_alone]], rows.tri_xyz[in_alone]))
+    whole = alone[rows.comp[alone] < 0]
+    surface.append((np.repeat(rows.piece[whole], 2), _squares(grid, rows.low[whole], rows.axis[whole],
+                                                              rows.side[whole])))
+
+
+def _settle(grid: Grid, degree: int, rows: _Rows, group: np.ndarray, found: list, surface: list) -> int:
+    """One face where several pieces meet or the two sides differ (surface in the plane): pair its
+    rows by moments where they match one to one, else resolve it in 2D. Returns 1 when resolved in 2D."""
+    rl, rh = group[rows.side[group] == 0], group[rows.side[group] == 1]
+    piece, axis = rows.piece, rows.axis
+    matched = _match(rows.moments(rl), rows.moments(rh))
+    if matched is not None:
+        found += [(piece[rl[[i]]], piece[rh[[j]]], axis[rl[[i]]],
+                   0.5 * (rows.moments(rl[[i]]) + rows.moments(rh[[j]]))) for i, j in matched]
+        return 0
 
     def region(r: int, centre: np.ndarray) -> np.ndarray | None:
-        return None if rcomp[r] < 0 else (plane_xyz[comp == rcomp[r]] - centre) / grid.spacing
+        return rows.region(grid, r, centre)
 
-    for g in np.flatnonzero(~settled):
-        rows = order[starts[g]:starts[g] + counts[g]]
-        rl, rh = rows[side[rows] == 0], rows[side[rows] == 1]
-        matched = _match(moments_of(rl), moments_of(rh))
-        if matched is not None:
-            found += [(piece[rl[[i]]], piece[rh[[j]]], axis[rl[[i]]],
-                       0.5 * (moments_of(rl[[i]]) + moments_of(rh[[j]]))) for i, j in matched]
-            continue
-        stats["faces_resolved_2d"] += 1
-        _resolve_face(grid, degree, int(axis[rows[0]]), low[rows[0]], piece[rl], piece[rh], region, rl, rh,
-                      found, surface)
+    _resolve_face(grid, degree, int(axis[group[0]]), rows.low[group[0]], piece[rl], piece[rh], region, rl, rh,
+                  found, surface)
+    return 1
 
+
+def _collect(grid: Grid, found: list, surface: list, n_mon: int) -> tuple[dict, dict]:
+    """The interfaces ordered by (minus, plus) and the boundary triangles by piece, as CutCells fields."""
     minus, plus, f_axis, f_mom = (np.concatenate(parts) for parts in zip(*found))
     forder = np.lexsort((plus, minus))
     f_mom = f_mom.reshape(-1, n_mon)[forder]
