@@ -66,7 +66,7 @@ def _run(resolution: int, degree: int, queue) -> None:
         "stages": m.timings, "nnz": int(m.matrix.nnz), "residual": st.stats.residual, "eta": m.eta,
         "assembly_elements_per_s": m.elements.count / (m.timings["element_blocks"] + m.timings["assembly"]),
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-        "backend": m._factor.backend,
+        "backend": m.solver.backend,
     })
 
 
@@ -78,8 +78,8 @@ def _solver(name: str, resolution: int, degree: int, queue) -> None:
     m, _, _ = _shell_method(resolution, degree)
     A = sp.csr_matrix(m.matrix)
     b = m._rhs(1.0, 1.0, None)
-    reference = m._factor.solve(b)
-    m._factor.free()
+    reference = m.solver.apply_inverse(b)
+    m.release_solver()
     t0 = time.perf_counter()
     if name == "pardiso":
         from engine.solvers.direct import Cholesky

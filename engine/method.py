@@ -24,7 +24,7 @@ import numpy as np
 
 from .errors import MethodUnavailableError
 from .output import FieldData
-from .solvers.cg import SolveStats
+from .solvers.linear import SolveStats
 
 if TYPE_CHECKING:
     from .grid import Grid

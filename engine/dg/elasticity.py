@@ -26,9 +26,9 @@ from ..geometry.surface import Surface
 from ..material import Material, von_mises
 from ..method import Setup, State
 from ..output import FieldData
-from ..solvers.cg import SolveStats
-from ..solvers.direct import Cholesky, NotPositiveDefinite
-from ..solvers.rigid import UnbalancedLoadError
+from ..solvers.direct import DirectSolver, NotPositiveDefinite
+from ..solvers.linear import SolveStats
+from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions
 from . import assembly, warping
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .embedding import SurfaceEmbedding
@@ -50,10 +50,6 @@ DEFAULT_PENALTY = {1: 2.5, 2: 10.0}
 # singular): Lame 1.8-2.2 per step, tip within 1.5% of k = 2 (docs/benchmarks.md). k = 2 keeps the full jump.
 JUMP_REST = {1: 0.1, 2: 1.0}
 MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means something else is wrong
-PIN_TOLERANCE = 1e-10  # a rigid mode is held when the Dirichlet patches see it with this share of its norm
-BALANCE_TOLERANCE = 1e-6
-COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per iteration
-COROTATED_MAX = 100
 
 
 @dataclass
@@ -111,7 +107,9 @@ class DGElasticity:
         self.dt: float | None = None
         self.rotations: np.ndarray | None = None
         self.warp_load = None
-        self._factor: Cholesky | None = None
+        self.solver: DirectSolver | None = None  # the factorised system; None once released
+        self._last_u: np.ndarray | None = None  # the corotated fixed point's start: the last solution
+        self._gradients: np.ndarray | None = None  # warping.mean_gradients, when the model warps
         say("assembly and factorisation", 0.6)
         self._build()
 
@@ -234,7 +232,7 @@ class DGElasticity:
             sp_ = surface_points(P["triangles"], P["element"], 2)
             mask = P["mask"][P["patch"][sp_.triangle]]
             b = body[sp_.element]
-            r = _rigid_fields(sp_.points - centre[b])  # [Q, 6, 3]
+            r = rigid_motions(sp_.points, centre[b])  # [Q, 6, 3], each body's about its centre
             r = r * mask[:, None, :]
             np.add.at(held, b, sp_.weights[:, None, None] * np.einsum("qmp,qlp->qml", r, r))
         out = []
@@ -272,12 +270,13 @@ class DGElasticity:
         basis, h = self.basis, self.basis.h
         c = self.elements.centres[members] - centre
         L = basis.L[members]  # rows: monomials 1, xi_x, xi_y, xi_z in the basis
-        one = L[:, 0, :]
-        x = [c[:, a, None] * one + h * L[:, 1 + a, :] for a in range(3)]  # coefficients of x_a
-        zero = np.zeros_like(one)
-        fields = [[one, zero, zero], [zero, one, zero], [zero, zero, one],
-                  [-x[1], x[0], zero], [-x[2], zero, x[0]], [zero, -x[2], x[1]]]
-        cols = np.stack([np.stack(f, axis=1).reshape(-1) for f in fields], axis=1)  # [members*3*n, 6]
+        one = L[:, 0, :]  # [members, n]: coefficients of the constant 1
+        x = np.stack([c[:, a, None] * one + h * L[:, 1 + a, :] for a in range(3)], axis=-1)  # of x_a: [members, n, 3]
+        # a rigid motion t + W x is affine in x: its coefficients are the motion evaluated at the
+        # coefficients of x, with the translations' constant 1 replaced by the coefficients of 1
+        r = rigid_motions(x.reshape(-1, 3), np.zeros(3))  # [members * n, 6, 3]
+        r[:, np.arange(3), np.arange(3)] = one.reshape(-1, 1)
+        cols = r.reshape(len(members), -1, 6, 3).transpose(0, 3, 1, 2).reshape(-1, 6)  # [members*3*n, 6]
         return cols @ combos
 
     # ------------------------------------------------------------------ system
@@ -292,7 +291,8 @@ class DGElasticity:
             t = time.perf_counter()
             groups, self.eta_b = self._groups()
             if self.rotations is not None:
-                groups, self.warp_load = warping.rotate(groups, self.rotations, warping.reference_state(self))
+                X0 = warping.reference_state(self.elements, self.basis)
+                groups, self.warp_load = warping.rotate(groups, self.rotations, X0)
             A = assembly.to_matrix(assembly.Blocks(np.concatenate([g.rows for g in groups]),
                                                    np.concatenate([g.cols for g in groups]),
                                                    np.concatenate([g.data for g in groups])), self.elements.count)
@@ -302,7 +302,7 @@ class DGElasticity:
             self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t
             t = time.perf_counter()
             try:
-                self._factor = self._factorise(A)
+                self.solver = DirectSolver(A, self._mode_matrix() if self.modes else None)
                 self.timings["factorisation"] = self.timings.get("factorisation", 0.0) + time.perf_counter() - t
                 break
             except NotPositiveDefinite:
@@ -322,21 +322,15 @@ class DGElasticity:
         self.rotations = rotations
         self._build()
 
-    def _factorise(self, A: sp.csr_matrix) -> Cholesky:
-        if not self.modes:
-            return Cholesky(A)
-        # bordered with the free rigid modes Q: [[A, Q], [Q^T, 0]] has exactly k = Q.shape[1] negative
-        # pivots when A is positive definite on the complement of the modes, more when it is not
-        Q = self._mode_matrix()
-        k = Q.shape[1]
-        zero = sp.csr_matrix((np.zeros(k), (np.arange(k), np.arange(k))), shape=(k, k))  # stored: PARDISO needs the diagonal
-        K = sp.bmat([[A, sp.csr_matrix(Q)], [sp.csr_matrix(Q.T), zero]], format="csr")
-        factor = Cholesky(K, definite=False)
-        if factor.negatives > Q.shape[1]:
-            raise NotPositiveDefinite(f"{factor.negatives - Q.shape[1]} negative pivots beyond the rigid modes")
-        return factor
+    def release_solver(self) -> None:
+        """Free the factorisation now, before the next one is made: PARDISO's memory is not
+        Python's, so a replaced factor would otherwise stay resident (issue 18)."""
+        if self.solver is not None:
+            self.solver.free()
+            self.solver = None
 
     def _mode_matrix(self) -> np.ndarray:
+        """The free rigid modes as columns [size, k] over all coefficients (orthonormal per body)."""
         Q = np.zeros((self.size, sum(q.shape[1] for _, q in self.modes)))
         col = 0
         s = 3 * self.n
@@ -399,11 +393,29 @@ class DGElasticity:
         the predicted u^k + dt v^k [E, 3, n] of a backward-Euler step (after ``set_time_step``)."""
         t0 = time.perf_counter()
         if self.material.model == "corotated":
-            return warping.solve_corotated(self, load_scale, value_scale, inertia, on_iteration, t0)
-        u, residual = self._linear_solve(load_scale, value_scale, inertia)
-        if on_iteration is not None:
-            on_iteration(1, residual)
-        return State(u, SolveStats(1, residual, [residual]), time.perf_counter() - t0)
+            return self._solve_corotated(load_scale, value_scale, inertia, on_iteration, t0)
+        u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration)
+        return State(u, stats, time.perf_counter() - t0)
+
+    def _solve_corotated(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
+                         on_iteration: Callable[[int, float], None] | None, t0: float) -> State:
+        """The fixed point of rotations and displacement (``warping.solve_corotated``), from the last solution."""
+        if self._gradients is None:
+            self._gradients = warping.mean_gradients(self.elements, self.basis)
+
+        def warped_solve(rotations: np.ndarray) -> tuple[np.ndarray, SolveStats]:
+            self.release_solver()  # before the refactorisation, not after it: one factor resident at a time
+            self.set_rotations(rotations)
+            return self._linear_solve(load_scale, value_scale, inertia)
+
+        start = np.zeros((self.elements.count, 3, self.n)) if self._last_u is None else self._last_u
+        try:
+            state = warping.solve_corotated(warped_solve, start, self._gradients, on_iteration, t0)
+        except warping.CorotatedDiverged:
+            self.release_solver()  # the job ends here: its factor need not wait for the method to go
+            raise
+        self._last_u = state.u
+        return state
 
     def _rhs(self, load_scale: float, value_scale: float, inertia: np.ndarray | None) -> np.ndarray:
         if self.rotations is not None:  # the rotated prescribed values are not linear in their scale
@@ -417,22 +429,11 @@ class DGElasticity:
             b = b + self.material.density * self.basis.h**3 / self.dt**2 * inertia
         return b.reshape(-1)
 
-    def _linear_solve(self, load_scale: float, value_scale: float, inertia) -> tuple[np.ndarray, float]:
-        b = self._rhs(load_scale, value_scale, inertia)
-        if self.modes:
-            k = sum(q.shape[1] for _, q in self.modes)
-            x = self._factor.solve(np.concatenate([b, np.zeros(k)]))[: self.size]
-        else:
-            x = self._factor.solve(b)
-        if not np.all(np.isfinite(x)):
-            raise VoxelasticError("dg: the solve produced non-finite values (singular system)")
-        r = self.matrix @ x - b
-        if self.modes:
-            Q = self._mode_matrix()
-            r = r - Q @ (Q.T @ r)
-        norm = np.linalg.norm(b)
-        residual = float(np.linalg.norm(r) / norm) if norm > 0 else float(np.linalg.norm(r))
-        return x.reshape(self.elements.count, 3, self.n), residual
+    def _linear_solve(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
+                      on_iteration: Callable[[int, float], None] | None = None) -> tuple[np.ndarray, SolveStats]:
+        """Coefficients [E, 3, n] of one solve with the current factorisation, and its statistics."""
+        x, stats = self.solver.solve(self._rhs(load_scale, value_scale, inertia), on_iteration=on_iteration)
+        return x.reshape(self.elements.count, 3, self.n), stats
 
     def condition_estimate(self) -> float:
         """2-norm condition number of the factorised matrix (Lanczos on A and on A^-1 through the
@@ -443,7 +444,8 @@ class DGElasticity:
             return float("nan")
         n = self.matrix.shape[0]
         top = spla.eigsh(self.matrix, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]
-        inverse = spla.LinearOperator((n, n), matvec=lambda v: self._factor.solve(np.asarray(v).ravel()), dtype=float)
+        inverse = spla.LinearOperator((n, n), matvec=lambda v: self.solver.apply_inverse(np.asarray(v).ravel()),
+                                      dtype=float)
         bottom = 1.0 / spla.eigsh(inverse, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]
         return float(top / bottom)
 
@@ -544,14 +546,3 @@ class DGElasticity:
             self._embedding = SurfaceEmbedding(self)
         return self._embedding
 
-
-def _rigid_fields(x: np.ndarray) -> np.ndarray:
-    """Rigid modes [Q, 6, 3] at points x [Q, 3] (relative to a centre): 3 translations, then rotations
-    in the planes (x, y), (x, z), (y, z)."""
-    Q = len(x)
-    r = np.zeros((Q, 6, 3))
-    r[:, 0, 0] = r[:, 1, 1] = r[:, 2, 2] = 1.0
-    r[:, 3, 0], r[:, 3, 1] = -x[:, 1], x[:, 0]
-    r[:, 4, 0], r[:, 4, 2] = -x[:, 2], x[:, 0]
-    r[:, 5, 1], r[:, 5, 2] = -x[:, 2], x[:, 1]
-    return r

@@ -6,44 +6,51 @@ affine polynomials, so X0 is exact). Element blocks use the element's rotation; 
 parts of interface and Nitsche blocks use the rotation of the side whose stress they carry
 (section 6.1); penalty blocks are not warped. Rotations come from the polar decomposition of each
 element's mean deformation gradient; a static solve iterates rotations -> assembly -> solve to a
-fixed point.
+fixed point. The method hands :func:`solve_corotated` the one step it owns (warp its operator by
+given rotations, factorise, solve) as a callable; this module reads none of its state.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 from ..errors import VoxelasticError
 from ..method import State
-from ..solvers.cg import SolveStats
+from ..solvers.linear import SolveStats
 from . import basis as B
 from . import kernels
 from .assembly import Group
+from .elements import Elements
+from .integrals import Basis
+
+COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per iteration
+COROTATED_MAX = 100
+
+# warp(rotations [E, 3, 3]) -> (u [E, 3, n], stats): the operator warped by those rotations, solved
+WarpedSolve = Callable[[np.ndarray], tuple[np.ndarray, SolveStats]]
 
 
-def reference_state(method) -> np.ndarray:
+def reference_state(elements: Elements, basis: Basis) -> np.ndarray:
     """X0 [E, 3, n]: coefficients of the identity map x = c_K + h xi in every element's basis."""
-    el, basis = method.elements, method.basis
     L = basis.L
-    c = el.centres
+    c = elements.centres
     return c[:, :, None] * L[:, None, 0, :] + basis.h * L[:, 1:4, :]
 
 
-def mean_gradients(method) -> np.ndarray:
+def mean_gradients(elements: Elements, basis: Basis) -> np.ndarray:
     """[E, 3, n]: (1 / vol) int_K d_a psi_I dV [1/m], so grad u = sum_I u[:, p, I] g[:, a, I]."""
-    el, basis = method.elements, method.basis
     n = basis.size
-    integral = basis.h**2 * np.einsum("eis,ast,et->eai", basis.T, B.derivative(basis.degree), el.moments[:, :n])
-    return integral / el.volume[:, None, None]
+    integral = basis.h**2 * np.einsum("eis,ast,et->eai", basis.T, B.derivative(basis.degree), elements.moments[:, :n])
+    return integral / elements.volume[:, None, None]
 
 
-def rotations(method, u: np.ndarray) -> np.ndarray:
-    """Rotation [E, 3, 3] of each element: polar factor of I + mean grad u (u [E, 3, n])."""
-    if getattr(method, "_mean_gradients", None) is None:
-        method._mean_gradients = mean_gradients(method)
-    F = np.eye(3) + np.einsum("epi,eai->epa", u, method._mean_gradients)
+def rotations(u: np.ndarray, gradients: np.ndarray) -> np.ndarray:
+    """Rotation [E, 3, 3] of each element: polar factor of I + mean grad u (u [E, 3, n],
+    ``gradients`` from :func:`mean_gradients`)."""
+    F = np.eye(3) + np.einsum("epi,eai->epa", u, gradients)
     U, _, Vt = np.linalg.svd(F)
     flip = np.linalg.det(U @ Vt) < 0
     U[flip, :, 2] *= -1  # a reflection is not a rotation: flip the least stretched direction
@@ -108,18 +115,18 @@ class CorotatedDiverged(VoxelasticError):
 DIVERGED_AFTER = 5
 
 
-def solve_corotated(method, load_scale: float, value_scale: float, inertia, on_iteration, t0: float):
-    """Fixed point of rotations and displacement; iterations = linear solves."""
-    from .elasticity import COROTATED_MAX, COROTATED_TOL
-
-    u = getattr(method, "_last_u", None)
-    u = np.zeros((method.elements.count, 3, method.n)) if u is None else u
+def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.ndarray,
+                    on_iteration: Callable[[int, float], None] | None, t0: float) -> State:
+    """Fixed point of rotations and displacement from ``start`` [E, 3, n]: u -> rotations(u) ->
+    ``warped_solve`` until u changes by less than COROTATED_TOL (relative); iterations = linear
+    solves, ``on_iteration(i, residual)`` after each. t0: when the solve began (perf_counter [s]).
+    Raises CorotatedDiverged when the changes grow, VoxelasticError after COROTATED_MAX."""
+    u = start
     history: list[float] = []
     changes: list[float] = []
     for it in range(1, COROTATED_MAX + 1):
-        _free_factor(method)
-        method.set_rotations(rotations(method, u))
-        new, residual = method._linear_solve(load_scale, value_scale, inertia)
+        new, stats = warped_solve(rotations(u, gradients))
+        residual = stats.residual
         change = float(np.linalg.norm(new - u) / max(np.linalg.norm(new), 1e-300))
         u = new
         history.append(residual)
@@ -129,7 +136,6 @@ def solve_corotated(method, load_scale: float, value_scale: float, inertia, on_i
         if change < COROTATED_TOL:
             break
         if _diverged(changes, COROTATED_TOL):
-            _free_factor(method)
             recent = ", ".join(f"{c:.3g}" for c in changes[-DIVERGED_AFTER:])
             raise CorotatedDiverged(
                 f"dg: the corotated fixed-point iteration diverges: relative changes {recent} in iterations "
@@ -139,8 +145,8 @@ def solve_corotated(method, load_scale: float, value_scale: float, inertia, on_i
         raise VoxelasticError(f"dg: the corotated rotations did not settle in {COROTATED_MAX} iterations "
                               f"(last relative change {change:.3g}); the load step is too large, use a quasistatic "
                               "analysis with more steps")
-    method._last_u = u
-    return State(u, SolveStats(it, residual, history), time.perf_counter() - t0, rotations=rotations(method, u))
+    seconds = time.perf_counter() - t0
+    return State(u, SolveStats(it, residual, history, seconds=seconds), seconds, rotations=rotations(u, gradients))
 
 
 def _diverged(changes: list[float], tol: float) -> bool:
@@ -151,11 +157,3 @@ def _diverged(changes: list[float], tol: float) -> bool:
     before, recent = min(changes[:-DIVERGED_AFTER]), changes[-DIVERGED_AFTER:]
     return min(recent) >= before and min(recent) > 1e4 * tol
 
-
-def _free_factor(method) -> None:
-    """Release the current factorisation before the next one is made: PARDISO's memory is not
-    Python's, so a replaced factor would otherwise stay resident (issue 18)."""
-    factor = getattr(method, "_factor", None)
-    if factor is not None:
-        factor.free()
-        method._factor = None

@@ -17,11 +17,12 @@ still gains and iterations remain.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
-from ..errors import VoxelasticError
+from .linear import SolverError, SolveStats
 
 
 # After the restarts, a true residual within this factor of rtol is returned with a warning;
@@ -33,17 +34,6 @@ RESTART_GAIN = 2.0
 MAX_RESTARTS = 10
 
 
-class SolverError(VoxelasticError):
-    """The linear solve did not converge; the message says why and what to change. ``reason``:
-    "loads", "cap", "indefinite", "nonfinite", "stagnation", "precision" (the true residual
-    stays above the tolerance however CG restarts: the storage precision or, in f64, the
-    operator's conditioning) or "singular" (a direct solve met a singular matrix)."""
-
-    def __init__(self, message: str, reason: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-
-
 class Space(Protocol):
     def zeros(self) -> Any: ...
     def dot(self, x: Any, y: Any) -> float: ...
@@ -51,21 +41,6 @@ class Space(Protocol):
     def xpby(self, x: Any, beta: float, y: Any) -> None: ...  # y = x + beta y
     def copy(self, src: Any, dst: Any) -> None: ...
     def finite(self, x: Any) -> bool: ...
-
-
-@dataclass
-class SolveStats:
-    """iterations: CG iterations (all restarts together); residual: final ||b - A x|| / ||b||
-    (recomputed, not recursed); history: recursive relative residual after each iteration (a
-    restart starts again from the true one); restarts: how often CG restarted from the true
-    residual; warnings: what the caller should report with the result (a true residual left
-    above the tolerance, within TRUE_RESIDUAL_SLACK of it)."""
-
-    iterations: int
-    residual: float
-    history: list[float] = field(default_factory=list)
-    restarts: int = 0
-    warnings: list[str] = field(default_factory=list)
 
 
 def vector_precision(x: Any) -> str:
@@ -174,6 +149,29 @@ def pcg(
     if true_rel > TRUE_RESIDUAL_SLACK * rtol:
         raise SolverError(message, "precision")
     return SolveStats(it, true_rel, history, restarts, warnings=[message])
+
+
+@dataclass
+class PCG:
+    """:func:`pcg` as a :class:`~engine.solvers.linear.LinearSolver`: the operator ``apply``, the
+    preconditioner and the stopping rule fixed at construction, b and the start x per solve."""
+
+    space: Space
+    apply: Callable[[Any, Any], None]
+    precondition: Callable[[Any, Any], None]
+    rtol: float
+    max_iterations: int
+    stagnation: int = 200
+
+    def solve(self, b: Any, x: Any | None = None,
+              on_iteration: Callable[[int, float], None] | None = None) -> tuple[Any, SolveStats]:
+        """(x, stats): ``x`` (default zero) overwritten with the solution; raises ``SolverError``."""
+        t0 = time.perf_counter()
+        x = self.space.zeros() if x is None else x
+        stats = pcg(self.space, self.apply, self.precondition, b, x, rtol=self.rtol,
+                    max_iterations=self.max_iterations, stagnation=self.stagnation, on_iteration=on_iteration)
+        stats.seconds = time.perf_counter() - t0
+        return x, stats
 
 
 def _fail(stop: str, it: int, rel: float, best: float, pq: float, rtol: float, max_iterations: int,

@@ -3,17 +3,22 @@
 PARDISO factorises the upper triangle as a symmetric positive definite matrix (mtype 2); a
 zero or negative pivot means the matrix is not positive definite, which the DG method uses to
 raise its penalty (Kaufmann et al. 2009 section 9.1). Bordered (indefinite) systems use
-symmetric indefinite PARDISO (mtype -2). The choice of PARDISO over SuperLU and Taichi's
+symmetric indefinite PARDISO (mtype -2). ``DirectSolver`` is the layer's solver
+(``linear.LinearSolver``) on such a factorisation. The choice of PARDISO over SuperLU and Taichi's
 SparseSolver is measured in docs/benchmarks.md (benchmarks/dg.py --solvers).
 """
 
 from __future__ import annotations
 
 import os
+import time
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from .linear import SolverError, SolveStats
 
 try:  # MKL wheels exist for x86-64 only; elsewhere SuperLU does the work
     import pypardiso
@@ -100,3 +105,67 @@ class Cholesky:
             self.free()
         except Exception:  # never raise from a finaliser (interpreter shutdown, MKL already unloaded)
             pass
+
+
+class DirectSolver:
+    """A :class:`~engine.solvers.linear.LinearSolver` by sparse Cholesky of A [n, n] (symmetric CSR).
+
+    Without ``modes``, A must be positive definite. With modes Q [n, k] (orthonormal columns: the
+    rigid motions no boundary holds), A need only be positive definite on their complement: the
+    bordered system [[A, Q], [Q^T, 0]] is factorised instead, whose solution x is orthogonal to Q
+    and whose inertia must show exactly k negative pivots. Either way a matrix that is not
+    positive definite (there) raises ``NotPositiveDefinite`` at construction. ``residual`` in the
+    statistics is ||A x - b|| / ||b|| with the part along Q removed (A x - b has none in exact
+    arithmetic; ||r|| itself where b = 0).
+    """
+
+    def __init__(self, A: sp.csr_matrix, modes: np.ndarray | None = None) -> None:
+        self.matrix = A
+        self.modes = modes if modes is not None and modes.shape[1] else None
+        if self.modes is None:
+            self.factor = Cholesky(A)
+            return
+        Q = self.modes
+        k = Q.shape[1]
+        zero = sp.csr_matrix((np.zeros(k), (np.arange(k), np.arange(k))), shape=(k, k))  # stored: PARDISO needs the diagonal
+        K = sp.bmat([[A, sp.csr_matrix(Q)], [sp.csr_matrix(Q.T), zero]], format="csr")
+        self.factor = Cholesky(K, definite=False)
+        # k negative pivots when A is positive definite on the complement of the modes, more when it is not
+        if self.factor.negatives > k:
+            negatives = self.factor.negatives
+            self.factor.free()
+            raise NotPositiveDefinite(f"{negatives - k} negative pivots beyond the rigid modes")
+
+    @property
+    def backend(self) -> str:
+        """What factorised: "pardiso" or "superlu"."""
+        return self.factor.backend
+
+    def apply_inverse(self, b: np.ndarray) -> np.ndarray:
+        """A^-1 b [n] through the factor (without modes only: with them it is the bordered inverse)."""
+        return self.factor.solve(b)
+
+    def solve(self, b: np.ndarray, x: np.ndarray | None = None,
+              on_iteration: Callable[[int, float], None] | None = None) -> tuple[np.ndarray, SolveStats]:
+        """(x [n], stats) for b [n]; ``x`` is ignored (nothing to start from). Raises
+        ``SolverError`` (reason "singular") when the solution is not finite."""
+        t0 = time.perf_counter()
+        n = self.matrix.shape[0]
+        if self.modes is not None:
+            x = self.factor.solve(np.concatenate([b, np.zeros(self.modes.shape[1])]))[:n]
+        else:
+            x = self.factor.solve(b)
+        if not np.all(np.isfinite(x)):
+            raise SolverError("solver: the direct solve produced non-finite values (singular system)", "singular")
+        r = self.matrix @ x - b
+        if self.modes is not None:
+            r = r - self.modes @ (self.modes.T @ r)
+        norm = np.linalg.norm(b)
+        residual = float(np.linalg.norm(r) / norm) if norm > 0 else float(np.linalg.norm(r))
+        if on_iteration is not None:
+            on_iteration(1, residual)
+        return x, SolveStats(1, residual, [residual], seconds=time.perf_counter() - t0)
+
+    def free(self) -> None:
+        """Release the factor's memory now (``Cholesky.free``; idempotent)."""
+        self.factor.free()

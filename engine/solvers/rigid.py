@@ -41,6 +41,23 @@ def rigid_modes(points: np.ndarray, axis: np.ndarray, center: np.ndarray | None 
     return np.stack(cols, axis=1)
 
 
+def rigid_motions(points: np.ndarray, center: np.ndarray | None = None) -> np.ndarray:
+    """Rigid modes as vector fields [n, m, d] at ``points`` [n, d] [m]: the columns of
+    :func:`rigid_modes` (same order: d translations, then rotations in the planes (k, l), k < l)
+    with every component at once. ``center``: [d], or [n, d] for one per point (points of several
+    bodies about their own centres); default the centroid."""
+    points = np.asarray(points, dtype=float)
+    n, d = points.shape
+    c = points.mean(axis=0) if center is None else np.asarray(center, dtype=float)
+    x = points - c
+    planes = list(itertools.combinations(range(d), 2))
+    r = np.zeros((n, d + len(planes), d))
+    r[:, np.arange(d), np.arange(d)] = 1.0
+    for m, (k, l) in enumerate(planes, start=d):
+        r[:, m, k], r[:, m, l] = -x[:, l], x[:, k]
+    return r
+
+
 def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np.ndarray,
                held: sp.spmatrix | None = None) -> list[np.ndarray]:
     """For each body, an orthonormal basis [n_body, k] (over that body's unfixed DOFs, in order) of

@@ -28,7 +28,7 @@ from ..material import Material, stress, von_mises
 from ..method import Setup, State
 from ..output import FieldData
 from ..runtime import device_array
-from ..solvers.cg import SolverError, pcg
+from ..solvers.cg import PCG, SolverError
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
@@ -270,8 +270,7 @@ class StaggeredElasticity:
         b = device_array(rhs)
         x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
         try:
-            stats = pcg(self.space, level.apply, self._preconditioner(self.multigrid.precondition), b, x,
-                        rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
+            _, stats = self._cg(self.multigrid.precondition).solve(b, x, on_iteration)
         except SolverError as exc:
             if exc.reason in ("cap", "precision"):
                 # the cap is the user's setting and the precision the storage's: Jacobi would
@@ -280,8 +279,7 @@ class StaggeredElasticity:
             # the V-cycle failed (lost definiteness, stagnated): plain Jacobi-PCG is slower but robust
             self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")
             x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
-            stats = pcg(self.space, level.apply, self._preconditioner(self._jacobi), b, x,
-                        rtol=self.rtol, max_iterations=self.max_iterations, on_iteration=on_iteration)
+            _, stats = self._cg(self._jacobi).solve(b, x, on_iteration)
         # a true residual the restarts left above rtol (within the solver's slack) goes in the report
         self.warnings.extend(w for w in stats.warnings if w not in self.warnings)
         u = x.to_numpy().astype(np.float64)
@@ -289,6 +287,11 @@ class StaggeredElasticity:
             u = self._without_rigid_motion(self._project(u))
         u = u * level.free
         return State(u, stats, time.perf_counter() - t0)
+
+    def _cg(self, inner: Callable) -> PCG:
+        """CG on the operator, preconditioned by ``inner`` (then off the free rigid modes)."""
+        return PCG(self.space, self.level.apply, self._preconditioner(inner), rtol=self.rtol,
+                   max_iterations=self.max_iterations)
 
     def _jacobi(self, r, z) -> None:
         kernels.scaled(self.dim, r, self.level.dinv, 1.0, z)
