@@ -154,7 +154,9 @@ def pcg(
 @dataclass
 class PCG:
     """:func:`pcg` as a :class:`~engine.solvers.linear.LinearSolver`: the operator ``apply``, the
-    preconditioner and the stopping rule fixed at construction, b and the start x per solve."""
+    preconditioner and the stopping rule fixed at construction, b and the start x per solve.
+    ``iterate``: the CG routine with :func:`pcg`'s signature (a caller hands its own reference so
+    that a test can wrap it where the caller looks it up)."""
 
     space: Space
     apply: Callable[[Any, Any], None]
@@ -162,13 +164,14 @@ class PCG:
     rtol: float
     max_iterations: int
     stagnation: int = 200
+    iterate: Callable[..., SolveStats] = pcg
 
     def solve(self, b: Any, x: Any | None = None,
               on_iteration: Callable[[int, float], None] | None = None) -> tuple[Any, SolveStats]:
         """(x, stats): ``x`` (default zero) overwritten with the solution; raises ``SolverError``."""
         t0 = time.perf_counter()
         x = self.space.zeros() if x is None else x
-        stats = pcg(self.space, self.apply, self.precondition, b, x, rtol=self.rtol,
+        stats = self.iterate(self.space, self.apply, self.precondition, b, x, rtol=self.rtol,
                     max_iterations=self.max_iterations, stagnation=self.stagnation, on_iteration=on_iteration)
         stats.seconds = time.perf_counter() - t0
         return x, stats

@@ -28,7 +28,7 @@ from ..material import Material, stress, von_mises
 from ..method import Setup, State
 from ..output import FieldData
 from ..runtime import device_array
-from ..solvers.cg import PCG, SolverError
+from ..solvers.cg import PCG, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .multigrid import Multigrid
@@ -291,7 +291,7 @@ class StaggeredElasticity:
     def _cg(self, inner: Callable) -> PCG:
         """CG on the operator, preconditioned by ``inner`` (then off the free rigid modes)."""
         return PCG(self.space, self.level.apply, self._preconditioner(inner), rtol=self.rtol,
-                   max_iterations=self.max_iterations)
+                   max_iterations=self.max_iterations, iterate=pcg)
 
     def _jacobi(self, r, z) -> None:
         kernels.scaled(self.dim, r, self.level.dinv, 1.0, z)
