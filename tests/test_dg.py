@@ -12,11 +12,9 @@ from engine.geometry.slicing import slice_cells
 from engine.grid import Grid, make_grid
 from engine.material import Material
 from engine.regions import Halfspaces
-from engine.runtime import init
 from tests.conftest import surface_of
 from verification.problems import problem
 
-init("cpu", "f64")
 EVERYWHERE = Halfspaces(np.zeros((0, 3)), np.zeros(0))
 MAT = Material(1.0, 0.3)
 LAM, MU = MAT.lame
