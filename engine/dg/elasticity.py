@@ -23,7 +23,7 @@ from ..boundary import Prescribed, hold_warnings, select_patch
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
-from ..material import Material, von_mises
+from ..material import STRESS_FIELDS, Material, pressure, von_mises
 from ..method import Setup, State
 from ..output import FieldData
 from ..solvers.direct import DirectSolver, NotPositiveDefinite
@@ -506,14 +506,15 @@ class DGElasticity:
             out[idx] = values
             return out
 
-        need_stress = any(n in names for n in ("strain", "stress", "von_mises"))
+        need_stress = any(n in names for n in STRESS_FIELDS)
         if "displacement" in names:
             data.cells["displacement"] = dense(self.evaluate(u, element, centres))
         if velocity is not None and "velocity" in names:
             data.cells["velocity"] = dense(self.evaluate(velocity, element, centres))
         if need_stress:
             eps, sig = self.stress_at(u, element, centres, rot)
-            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3))):
+            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3)),
+                              ("pressure", pressure(sig, 3))):
                 if name in names:
                     data.cells[name] = dense(val)
         if probes is not None and len(probes):
@@ -534,7 +535,7 @@ class DGElasticity:
             if need_stress:
                 eps, sig = self.stress_at(u, sel, probes[ok], rot)
                 for name, val, width in (("strain", eps, (6,)), ("stress", sig, (6,)),
-                                         ("von_mises", von_mises(sig, 3), ())):
+                                         ("von_mises", von_mises(sig, 3), ()), ("pressure", pressure(sig, 3), ())):
                     if name in names:
                         data.probes[name] = probe(val, width)
         if surface:

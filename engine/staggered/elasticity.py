@@ -24,7 +24,7 @@ from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
-from ..material import Material, stress, von_mises
+from ..material import STRESS_FIELDS, Material, pressure, stress, von_mises
 from ..method import Setup, State
 from ..output import FieldData
 from ..runtime import device_array
@@ -341,17 +341,18 @@ class StaggeredElasticity:
         if "displacement" in names:
             disp = np.stack([0.5 * (full[a][cut] + shifted(full[a], eye[a])) for a in range(d)], axis=-1)
             out["displacement"] = np.where(solid[..., None], disp, np.nan)
-        if any(n in names for n in ("strain", "stress", "von_mises")):
+        if any(n in names for n in STRESS_FIELDS):
             strain = self._cell_strain(full, shifted, cut)
             lam, mu = self.material.lame
             if "strain" in names:
                 out["strain"] = np.where(solid[..., None], strain, np.nan)
-            if "stress" in names or "von_mises" in names:
+            if any(n in names for n in STRESS_FIELDS[1:]):
                 sigma = stress(strain, lam, mu, d)
                 if "stress" in names:
                     out["stress"] = np.where(solid[..., None], sigma, np.nan)
-                if "von_mises" in names:
-                    out["von_mises"] = np.where(solid, von_mises(sigma, d, lam, mu), np.nan)
+                for name, of in (("von_mises", von_mises), ("pressure", pressure)):
+                    if name in names:
+                        out[name] = np.where(solid, of(sigma, d, lam, mu), np.nan)
         return out
 
     def _cell_strain(self, full, shifted, cut) -> np.ndarray:
@@ -408,7 +409,7 @@ class StaggeredElasticity:
             out["velocity"] = self.point_displacement(velocity, probes)
         cell = self.grid.cell_of(probes)
         inside = np.all((cell >= 0) & (cell < np.asarray(self.grid.shape)), axis=1)
-        for name in ("strain", "stress", "von_mises"):
+        for name in STRESS_FIELDS:
             if name in cells:
                 arr = cells[name]
                 vals = np.full((len(probes),) + arr.shape[self.dim:], np.nan)
