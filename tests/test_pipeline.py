@@ -47,19 +47,6 @@ def test_limits_are_checked_before_any_work(tmp_path):
         prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_triangles=10))
 
 
-@pytest.mark.parametrize("degree, peaks", [(1, (1.11, 2.60)), (2, (5.34, 14.5))])
-def test_dg_memory_estimate_covers_the_measured_peaks_of_its_direct_solver(degree, peaks):
-    # peak RSS [GiB] of the shell jobs of `python -m benchmarks scaling` on 26^3 and 34^3 grids; the
-    # Cholesky factor's fill grows with the grid's side, so a per-cell constant fell short (0.65-0.8x)
-    from engine.grid import Grid
-    from engine.pipeline import estimate_memory
-    from schemas.job import DGMethod
-
-    for n, peak in zip((26, 34), peaks):
-        estimate = estimate_memory(Grid(origin=(0.0,) * 3, spacing=1.0, shape=(n,) * 3), DGMethod(degree=degree)) / 2**30
-        assert peak <= estimate <= 2 * peak, (n, estimate, peak)
-
-
 def test_polygon_spec_in_2d():
     spec = parse_job(
         {
