@@ -10,12 +10,12 @@ u_hat = u^k + dt v^k and v^{k+1} = (u^{k+1} - u^k) / dt. Static runs never build
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .method import Method
 from .output import FieldData
 
 Progress = Callable[[str, float, dict], None]
@@ -34,7 +34,8 @@ class AnalysisResult:
     solve_seconds: float = 0.0
 
 
-def run_analysis(method, analysis, output, progress: Progress, start: float = 0.4, end: float = 0.95) -> AnalysisResult:
+def run_analysis(method: Method, analysis, output, progress: Progress, start: float = 0.4,
+                 end: float = 0.95) -> AnalysisResult:
     """Drive ``method`` through ``analysis`` (a schemas analysis model) producing ``output``'s fields."""
     names = list(output.fields)
     probes = np.asarray(output.probes, dtype=float) if output.probes else None

@@ -21,9 +21,10 @@ def _default_data_dir() -> Path:
 
 
 def _default_cache_dir() -> Path:
-    # the same place the CLI uses, so CLI and service share the geometry and kernel caches
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "voxelastic"
+    # the engine's own cache root, so CLI and service share the geometry and kernel caches
+    from engine.geometry.cache import cache_root
+
+    return cache_root()
 
 
 def _physical_memory() -> int:
