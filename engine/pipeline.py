@@ -146,24 +146,26 @@ def prepare_geometry(
         "geometry": spec.geometry.model_dump(mode="json", exclude={"mesh"}),
         "grid": grid.to_dict(),
     }
-    geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
-    cache_kind, compute = _GEOMETRY[entry.geometry]
-    value, geo.cache_hit = cache.get_or_compute(cache_key(cache_kind, identity, params), lambda: compute(surface, grid))
-    setattr(geo, entry.geometry, value)
-    geo.warnings += list(value.warnings)
+    geo = compute_geometry(entry.kind, surface, grid, cache=cache, identity=identity, params=params)
     times["cut_cells"] = time.perf_counter() - t
     geo.stage_times = times
     progress("cut_cells", 0.3, {"cache_hit": geo.cache_hit})
     return geo
 
 
-def compute_geometry(method_kind: str, surface: Surface, grid: Grid) -> Geometry:
-    """The cut-cell geometry that method ``method_kind`` needs on ``grid``, uncached (for studies
-    that pin their own grid; jobs go through :func:`prepare_geometry`)."""
+def compute_geometry(method_kind: str, surface: Surface, grid: Grid, *, cache: GeometryCache | None = None,
+                     identity: bytes = b"", params: dict | None = None) -> Geometry:
+    """The cut-cell geometry that method ``method_kind`` needs on ``grid``: from ``cache`` under the
+    key of the mesh ``identity`` and the job's ``params`` when given, else computed (studies that
+    pin their own grid)."""
     entry = method_entry(method_kind)
-    _, compute = _GEOMETRY[entry.geometry]
+    cache_kind, compute = _GEOMETRY[entry.geometry]
     geo = Geometry(surface=surface, grid=grid, warnings=list(surface.warnings))
-    value = compute(surface, grid)
+    if cache is None:
+        value = compute(surface, grid)
+    else:
+        value, geo.cache_hit = cache.get_or_compute(cache_key(cache_kind, identity, params or {}),
+                                                    lambda: compute(surface, grid))
     setattr(geo, entry.geometry, value)
     geo.warnings += list(value.warnings)
     return geo
