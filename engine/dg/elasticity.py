@@ -1,4 +1,5 @@
-"""Hex-sliced DG linear elasticity (Kaufmann et al. 2009): setup, solves, fields.
+"""Hex-sliced DG linear elasticity (Kaufmann et al. 2009): setup and solves; the boundary terms
+(``boundary_terms.py``) and the output fields (``fields.py``) are the class's other two parts.
 
 ``DGElasticity`` is built once per geometry: elements (tiny pieces merged), orthonormal bases,
 element / interface / Nitsche blocks, loads, the rigid modes left free; then an analysis driver
@@ -19,21 +20,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import Prescribed, hold_warnings, select_patch
-from ..errors import BoundaryError, VoxelasticError
+from ..boundary import Prescribed, hold_warnings
+from ..errors import VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
-from ..material import STRESS_FIELDS, Material, pressure, von_mises
+from ..material import Material
 from ..method import Setup, State
-from ..output import FieldData
 from ..solvers.direct import DirectSolver, NotPositiveDefinite
 from ..solvers.linear import SolveStats
-from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions
 from . import assembly, warping
+from .boundary_terms import BoundaryTerms
+from .fields import Fields
 from .elements import MERGE_FRACTION, Elements, make_elements
-from .embedding import SurfaceEmbedding
-from .integrals import Basis, make_basis, projected_load, surface_points
-from .location import locate, owners
+from .integrals import Basis, make_basis
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
@@ -53,7 +52,7 @@ MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means someth
 
 
 @dataclass
-class DGElasticity:
+class DGElasticity(BoundaryTerms, Fields):
     """The DG method on one sliced geometry. ``loads`` are staggered-style ``SurfaceLoad`` objects
     (traction / pressure / stress on the surface inside a region); body_force [3] or callable [N/m^3]."""
 
@@ -118,168 +117,12 @@ class DGElasticity:
     def size(self) -> int:
         return self.elements.count * 3 * self.n
 
-    def _dirichlet_patches(self) -> dict:
-        """Surface patches of the displacement boundaries: one row per (boundary, element)."""
-        el = self.elements
-        tris, elem, patch, masks, values, names = [], [], [], [], [], []
-        count = 0
-        for k, bc in enumerate(self.prescribed):
-            clipped, source = select_patch(bc.region, el.boundary_triangles, bc.name)
-            owner = el.boundary_element[source]
-            uniq, local = np.unique(owner, return_inverse=True)
-            comp = bc.mask(3)
-            tris.append(clipped)
-            elem.append(owner)
-            patch.append(local + count)
-            masks.append(np.tile(comp.astype(float), (len(uniq), 1)))
-            values += [k] * len(uniq)
-            count += len(uniq)
-        if count == 0:
-            return {"count": 0}
-        return {"count": count, "triangles": np.concatenate(tris), "element": np.concatenate(elem),
-                "patch": np.concatenate(patch), "mask": np.concatenate(masks), "boundary": np.asarray(values)}
-
-    def _loads(self) -> np.ndarray:
-        """Consistent load vector [E, 3, n] [N] of body force and surface loads (unscaled)."""
-        el, basis, n = self.elements, self.basis, self.n
-        f = np.zeros((el.count, 3, n))
-        if self.body_force is not None:
-            if callable(self.body_force):
-                rule = self.volume_rule()
-                b = np.asarray(self.body_force(rule.points), dtype=float).reshape(-1, 3)
-                f += basis.tested(el.count, rule.element, rule.xi, rule.weights[:, None] * b)
-            else:
-                g = np.asarray(self.body_force, dtype=float).reshape(3)
-                mean = basis.h**3 * np.einsum("eis,es->ei", basis.T, el.moments[:, :n])  # int psi_I dV
-                f += g[None, :, None] * mean[:, None, :]
-        for load in self.surface_loads:
-            clipped, source = select_patch(load.region, el.boundary_triangles, load.name)
-            sp_ = surface_points(clipped, el.boundary_element[source], self.degree + 3)
-            t = load.tractions(sp_.points, sp_.normals)
-            f += basis.tested(el.count, sp_.element, self._xi(sp_.element, sp_.points), sp_.weights[:, None] * t)
-        if not np.all(np.isfinite(f)):
-            raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
-        return f
-
     def volume_rule(self) -> VolumeRule:
         """Quadrature exact to degree 4 on every element (cached)."""
         if getattr(self, "_rule", None) is None:
             self._rule = volume_rule(self.elements)
         return self._rule
 
-    def _xi(self, element: np.ndarray, points: np.ndarray) -> np.ndarray:
-        return (np.asarray(points) - self.elements.centres[element]) / self.basis.h
-
-    def _dirichlet_rhs(self, eta_b: np.ndarray, value_scale: float = 1.0, rotations: np.ndarray | None = None
-                       ) -> np.ndarray:
-        """Nitsche right-hand side [E, 3, n] for the prescribed values g (times value_scale):
-        -int (Pi g) . sigma(v) n + eta_b int (mu (Pi g . v + (Pi g . n) (v . n)) + lam P(Pi g . n) P(v . n)), P the
-        projection onto degree k - 1 (``kernels.nitsche_blocks``). Warped (rotations [E, 3, 3]):
-        the consistency part sees g in the element's frame, R^T (x + g) - x, and its force is rotated back."""
-        el, basis, n = self.elements, self.basis, self.n
-        out = np.zeros((el.count, 3, n))
-        P = self.patches
-        if P["count"] == 0:
-            return out
-        sp_ = surface_points(P["triangles"], P["element"], 2 * self.degree + 2)
-        patch = P["patch"][sp_.triangle]
-        mask = P["mask"][patch]
-        g = np.zeros((len(sp_.points), 3))
-        for k, bc in enumerate(self.prescribed):
-            on = P["boundary"][patch] == k
-            if not np.any(on):
-                continue
-            if callable(bc.value):
-                g[on] = np.asarray(bc.value(sp_.points[on]), dtype=float).reshape(-1, 3)
-            else:
-                g[on] = np.array([0.0 if v is None else float(v) for v in bc.value])
-        if not np.all(np.isfinite(g)):
-            raise BoundaryError("boundaries: a prescribed displacement is not finite at some surface points")
-        g = value_scale * g * mask
-        gc = g
-        if rotations is not None:
-            x = sp_.points
-            gc = (np.einsum("qba,qb->qa", rotations[sp_.element], x + g) - x) * mask
-        nrm, w = sp_.normals, sp_.weights
-        xi = self._xi(sp_.element, sp_.points)
-        mu, lam = self.mu, self.lam
-        gn = np.einsum("qa,qa->q", g, nrm)
-        pen = eta_b[patch][:, None] * mask * mu * (g + gn[:, None] * nrm)  # [Q, p]
-        out += basis.tested(el.count, sp_.element, xi, w[:, None] * pen)
-        # the volumetric part penalises only the normal jump's projection onto degree k - 1 (kernels.nitsche_blocks)
-        out += projected_load(basis, self.patch_low, self.patch_owner, P["mask"], xi, patch,
-                              lam * eta_b[patch] * w * gn, el.count)
-        if self.flux != "ip":
-            return out
-        # g . sigma(psi_I e_p) n = sum_a V_pa d_a psi_I, V_pa = mu (g_p n_a + n_p g_a) + lam (g . n) delta_pa
-        gn_c = np.einsum("qa,qa->q", gc, nrm)
-        V = mu * (gc[:, :, None] * nrm[:, None, :] + nrm[:, :, None] * gc[:, None, :]) + lam * gn_c[:, None, None] * np.eye(3)
-        cons = basis.tested(el.count, sp_.element, xi, w[:, None, None] * V, gradient=True)  # [E, p, I]
-        if rotations is not None:  # one rotation per element: it commutes with the sum over its points
-            cons = np.einsum("eps,esi->epi", rotations, cons)
-        return out - cons
-
-    def _free_modes(self) -> list:
-        """Per body, the rigid modes the Dirichlet patches leave free: (elements, basis [E_b*3*n, k])."""
-        el, basis, n = self.elements, self.basis, self.n
-        body = el.bodies()
-        P = self.patches
-        held = np.zeros((body.max() + 1, 6, 6))
-        centre = np.zeros((body.max() + 1, 3))
-        np.add.at(centre, body, el.centres * el.volume[:, None])
-        centre /= np.bincount(body, weights=el.volume)[:, None]
-        if P["count"]:
-            sp_ = surface_points(P["triangles"], P["element"], 2)
-            mask = P["mask"][P["patch"][sp_.triangle]]
-            b = body[sp_.element]
-            r = rigid_motions(sp_.points, centre[b])  # [Q, 6, 3], each body's about its centre
-            r = r * mask[:, None, :]
-            np.add.at(held, b, sp_.weights[:, None, None] * np.einsum("qmp,qlp->qml", r, r))
-        out = []
-        for label in np.unique(body):
-            members = np.nonzero(body == label)[0]
-            scale = np.bincount(body, weights=el.volume)[label] ** (1 / 3)
-            G = held[label]
-            # normalise rotations by the body's size so translations and rotations compare
-            S = np.diag([1, 1, 1, 1 / scale, 1 / scale, 1 / scale])
-            w, v = np.linalg.eigh(S @ G @ S)
-            loose = v[:, w < PIN_TOLERANCE * max(float(w.max(initial=0.0)), 1e-300) + (w.max(initial=0.0) == 0)]
-            if loose.shape[1] == 0:
-                continue
-            modes = self._mode_coefficients(members, centre[label], S @ loose)  # [members * 3 n, k]
-            q, _ = np.linalg.qr(modes)
-            out.append((members, q))
-        if out:
-            size = np.abs(self.load_vector).sum()
-            for members, q in out:
-                f = self.load_vector[members].reshape(-1)
-                if size > 0 and np.abs(q.T @ f).max() * np.sqrt(len(f)) > BALANCE_TOLERANCE * size:
-                    # work of the loads on a unit translation: the coefficients of 1 are L[:, 0, :]
-                    net = np.einsum("epi,ei->p", self.load_vector[members], basis.L[members][:, 0, :])
-                    raise UnbalancedLoadError(
-                        f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body of "
-                        f"{len(members)} element(s) free and its loads do not balance (net force "
-                        f"{np.round(net, 9).tolist()} N); add a displacement boundary on that body or balance the loads")
-            self.warnings.append(
-                f"{sum(q.shape[1] for _, q in out)} rigid-body mode(s) are not held by any displacement boundary; "
-                "the loads balance, so the solution is the one with no rigid motion (orthogonal to those modes)")
-        return out
-
-    def _mode_coefficients(self, members: np.ndarray, centre: np.ndarray, combos: np.ndarray) -> np.ndarray:
-        """Coefficients [len(members) * 3 n, k] of rigid motions sum_m combos[m, j] r_m (rotations about centre [3])."""
-        basis, h = self.basis, self.basis.h
-        c = self.elements.centres[members] - centre
-        L = basis.L[members]  # rows: monomials 1, xi_x, xi_y, xi_z in the basis
-        one = L[:, 0, :]  # [members, n]: coefficients of the constant 1
-        x = np.stack([c[:, a, None] * one + h * L[:, 1 + a, :] for a in range(3)], axis=-1)  # of x_a: [members, n, 3]
-        # a rigid motion t + W x is affine in x: its coefficients are the motion evaluated at the
-        # coefficients of x, with the translations' constant 1 replaced by the coefficients of 1
-        r = rigid_motions(x.reshape(-1, 3), np.zeros(3))  # [members * n, 6, 3]
-        r[:, np.arange(3), np.arange(3)] = one.reshape(-1, 1)
-        cols = r.reshape(len(members), -1, 6, 3).transpose(0, 3, 1, 2).reshape(-1, 6)  # [members*3*n, 6]
-        return cols @ combos
-
-    # ------------------------------------------------------------------ system
     @property
     def jump_rest(self) -> float:
         """Penalty weight on the zero-mean part of interface jumps (JUMP_REST; BZ: 1)."""
@@ -328,17 +171,6 @@ class DGElasticity:
         if self.solver is not None:
             self.solver.free()
             self.solver = None
-
-    def _mode_matrix(self) -> np.ndarray:
-        """The free rigid modes as columns [size, k] over all coefficients (orthonormal per body)."""
-        Q = np.zeros((self.size, sum(q.shape[1] for _, q in self.modes)))
-        col = 0
-        s = 3 * self.n
-        for members, q in self.modes:
-            rows = (members[:, None] * s + np.arange(s)[None, :]).reshape(-1)
-            Q[rows, col:col + q.shape[1]] = q
-            col += q.shape[1]
-        return Q
 
     def _groups(self) -> tuple[list[assembly.Group], np.ndarray]:
         """All blocks of the operator (element, interface, Nitsche) and the Nitsche penalties [b]."""
@@ -449,101 +281,11 @@ class DGElasticity:
         bottom = 1.0 / spla.eigsh(inverse, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]
         return float(top / bottom)
 
-    # ------------------------------------------------------------------ fields
-    def evaluate(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """Displacement [N, 3] [m] of coefficients u [E, 3, n] at points [N, 3] of ``element`` [N]."""
-        psi = self.basis.values(element, self._xi(element, points))
-        return np.einsum("qpi,qi->qp", u[element], psi)
 
-    def gradient(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """Displacement gradient [N, 3, 3] (du_p / dx_a at [:, p, a]) at points of ``element``."""
-        grad = self.basis.gradients(element, self._xi(element, points))
-        return np.einsum("qpi,qai->qpa", u[element], grad)
 
-    def stress_at(self, u: np.ndarray, element: np.ndarray, points: np.ndarray,
-                  rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(strain, stress) Voigt [N, 6] (xx, yy, zz, yz, xz, xy; tensor strain) at points of ``element``;
-        with rotations [E, 3, 3] the corotated strain sym(R^T F) - I."""
-        G = self.gradient(u, element, points)
-        if rotations is not None:
-            F = np.eye(3) + G
-            G = np.einsum("qba,qbc->qac", rotations[element], F) - np.eye(3)
-        eps = 0.5 * (G + G.transpose(0, 2, 1))
-        voigt = np.stack([eps[:, 0, 0], eps[:, 1, 1], eps[:, 2, 2], eps[:, 1, 2], eps[:, 0, 2], eps[:, 0, 1]], axis=1)
-        from ..material import stress as hooke
 
-        return voigt, hooke(voigt, self.lam, self.mu, 3)
 
-    def cell_elements(self) -> tuple[np.ndarray, np.ndarray]:
-        """(cells [C, 3], element [C]): every cell holding material and the element of its largest piece."""
-        cut, el = self.cut, self.elements
-        order = np.lexsort((-cut.volume, self.elements.grid.linear_index(cut.piece_cell)))
-        lin = self.elements.grid.linear_index(cut.piece_cell[order])
-        first = np.concatenate([[True], lin[1:] != lin[:-1]])
-        pick = order[first]
-        return cut.piece_cell[pick], el.piece_element[pick]
 
-    def locate(self, points: np.ndarray) -> np.ndarray:
-        """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
-        return locate(self.elements, self.cut, self.surface, points)
 
-    def owners(self, points: np.ndarray) -> np.ndarray:
-        """Element [N] of points known to lie in the solid or on its surface (``location.owners``)."""
-        return owners(self.elements, self.cut, points)
 
-    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
-               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
-        grid = self.elements.grid
-        u = state.u
-        rot = state.rotations
-        cells, element = self.cell_elements()
-        centres = grid.sample_points(cells)
-        data = FieldData(time=time_value)
-        idx = tuple(cells.T)
-
-        def dense(values: np.ndarray) -> np.ndarray:
-            out = np.full(tuple(grid.shape) + values.shape[1:], np.nan)
-            out[idx] = values
-            return out
-
-        need_stress = any(n in names for n in STRESS_FIELDS)
-        if "displacement" in names:
-            data.cells["displacement"] = dense(self.evaluate(u, element, centres))
-        if velocity is not None and "velocity" in names:
-            data.cells["velocity"] = dense(self.evaluate(velocity, element, centres))
-        if need_stress:
-            eps, sig = self.stress_at(u, element, centres, rot)
-            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3)),
-                              ("pressure", pressure(sig, 3))):
-                if name in names:
-                    data.cells[name] = dense(val)
-        if probes is not None and len(probes):
-            probes = np.asarray(probes, dtype=float)
-            where = self.locate(probes)
-            ok = where >= 0
-            sel = where[ok]
-
-            def probe(values: np.ndarray, width: tuple) -> np.ndarray:
-                out = np.full((len(probes),) + width, np.nan)
-                out[ok] = values
-                return out
-
-            if "displacement" in names:
-                data.probes["displacement"] = probe(self.evaluate(u, sel, probes[ok]), (3,))
-            if velocity is not None and "velocity" in names:
-                data.probes["velocity"] = probe(self.evaluate(velocity, sel, probes[ok]), (3,))
-            if need_stress:
-                eps, sig = self.stress_at(u, sel, probes[ok], rot)
-                for name, val, width in (("strain", eps, (6,)), ("stress", sig, (6,)),
-                                         ("von_mises", von_mises(sig, 3), ()), ("pressure", pressure(sig, 3), ())):
-                    if name in names:
-                        data.probes[name] = probe(val, width)
-        if surface:
-            data.surface["displacement"] = self.embedding().displacement(u)
-        return data
-
-    def embedding(self) -> SurfaceEmbedding:
-        if getattr(self, "_embedding", None) is None:
-            self._embedding = SurfaceEmbedding(self)
-        return self._embedding
 

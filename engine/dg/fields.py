@@ -1,0 +1,117 @@
+"""The DG method's output: the displacement, strain and stress of the element polynomials at cell
+centres, at probes (located in their elements) and on the embedded surface, as a part of
+``DGElasticity``.
+
+Mixed into ``elasticity.DGElasticity`` (it reads the method's elements, basis and material).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..material import STRESS_FIELDS, pressure, von_mises
+from ..method import State
+from ..output import FieldData
+from .embedding import SurfaceEmbedding
+from .location import locate, owners
+
+
+class Fields:
+    """Output fields of ``DGElasticity`` (see the module docstring)."""
+
+    def evaluate(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement [N, 3] [m] of coefficients u [E, 3, n] at points [N, 3] of ``element`` [N]."""
+        psi = self.basis.values(element, self._xi(element, points))
+        return np.einsum("qpi,qi->qp", u[element], psi)
+
+    def gradient(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement gradient [N, 3, 3] (du_p / dx_a at [:, p, a]) at points of ``element``."""
+        grad = self.basis.gradients(element, self._xi(element, points))
+        return np.einsum("qpi,qai->qpa", u[element], grad)
+
+    def stress_at(self, u: np.ndarray, element: np.ndarray, points: np.ndarray,
+                  rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(strain, stress) Voigt [N, 6] (xx, yy, zz, yz, xz, xy; tensor strain) at points of ``element``;
+        with rotations [E, 3, 3] the corotated strain sym(R^T F) - I."""
+        G = self.gradient(u, element, points)
+        if rotations is not None:
+            F = np.eye(3) + G
+            G = np.einsum("qba,qbc->qac", rotations[element], F) - np.eye(3)
+        eps = 0.5 * (G + G.transpose(0, 2, 1))
+        voigt = np.stack([eps[:, 0, 0], eps[:, 1, 1], eps[:, 2, 2], eps[:, 1, 2], eps[:, 0, 2], eps[:, 0, 1]], axis=1)
+        from ..material import stress as hooke
+
+        return voigt, hooke(voigt, self.lam, self.mu, 3)
+
+    def cell_elements(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cells [C, 3], element [C]): every cell holding material and the element of its largest piece."""
+        cut, el = self.cut, self.elements
+        order = np.lexsort((-cut.volume, self.elements.grid.linear_index(cut.piece_cell)))
+        lin = self.elements.grid.linear_index(cut.piece_cell[order])
+        first = np.concatenate([[True], lin[1:] != lin[:-1]])
+        pick = order[first]
+        return cut.piece_cell[pick], el.piece_element[pick]
+
+    def locate(self, points: np.ndarray) -> np.ndarray:
+        """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
+        return locate(self.elements, self.cut, self.surface, points)
+
+    def owners(self, points: np.ndarray) -> np.ndarray:
+        """Element [N] of points known to lie in the solid or on its surface (``location.owners``)."""
+        return owners(self.elements, self.cut, points)
+
+    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
+               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
+        grid = self.elements.grid
+        u = state.u
+        rot = state.rotations
+        cells, element = self.cell_elements()
+        centres = grid.sample_points(cells)
+        data = FieldData(time=time_value)
+        idx = tuple(cells.T)
+
+        def dense(values: np.ndarray) -> np.ndarray:
+            out = np.full(tuple(grid.shape) + values.shape[1:], np.nan)
+            out[idx] = values
+            return out
+
+        need_stress = any(n in names for n in STRESS_FIELDS)
+        if "displacement" in names:
+            data.cells["displacement"] = dense(self.evaluate(u, element, centres))
+        if velocity is not None and "velocity" in names:
+            data.cells["velocity"] = dense(self.evaluate(velocity, element, centres))
+        if need_stress:
+            eps, sig = self.stress_at(u, element, centres, rot)
+            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3)),
+                              ("pressure", pressure(sig, 3))):
+                if name in names:
+                    data.cells[name] = dense(val)
+        if probes is not None and len(probes):
+            probes = np.asarray(probes, dtype=float)
+            where = self.locate(probes)
+            ok = where >= 0
+            sel = where[ok]
+
+            def probe(values: np.ndarray, width: tuple) -> np.ndarray:
+                out = np.full((len(probes),) + width, np.nan)
+                out[ok] = values
+                return out
+
+            if "displacement" in names:
+                data.probes["displacement"] = probe(self.evaluate(u, sel, probes[ok]), (3,))
+            if velocity is not None and "velocity" in names:
+                data.probes["velocity"] = probe(self.evaluate(velocity, sel, probes[ok]), (3,))
+            if need_stress:
+                eps, sig = self.stress_at(u, sel, probes[ok], rot)
+                for name, val, width in (("strain", eps, (6,)), ("stress", sig, (6,)),
+                                         ("von_mises", von_mises(sig, 3), ()), ("pressure", pressure(sig, 3), ())):
+                    if name in names:
+                        data.probes[name] = probe(val, width)
+        if surface:
+            data.surface["displacement"] = self.embedding().displacement(u)
+        return data
+
+    def embedding(self) -> SurfaceEmbedding:
+        if getattr(self, "_embedding", None) is None:
+            self._embedding = SurfaceEmbedding(self)
+        return self._embedding
