@@ -86,8 +86,11 @@ def test_ctrl_c_is_one_line_exit_130_and_no_temporary_files(tmp_path):
                analysis={"kind": "dynamic", "time_step": 1e-3, "steps": 400})
     out = tmp_path / "out"
     out.mkdir()
+    # a pytest started in the background (`... &` in a script) has SIGINT ignored, and the child would
+    # inherit that: the CLI gets the disposition a terminal gives it
     proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "run", str(long), "-o", str(out / "r.h5"),
-                             "--no-cache"], stderr=subprocess.PIPE, text=True, env=ENV)
+                             "--no-cache"], stderr=subprocess.PIPE, text=True, env=ENV,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = []
     for line in proc.stderr:  # until the solve runs
         seen.append(line)

@@ -161,8 +161,9 @@ def test_cell_chunks_are_about_a_mebibyte():
          "probes/displacement: shape (3, 3), expected (2, 3) (probe count + vector components)"),
         (lambda r: r.fields.surface.update(displacement=np.zeros((4, 2))),
          "surface/displacement: shape (4, 2), expected (4, 3) (surface vertex count + vector components)"),
-        (lambda r: r.fields.cells.update(pressure=np.zeros((3, 4, 5))),
-         "fields/pressure: unknown field name; known fields: displacement, velocity, strain, stress, von_mises"),
+        (lambda r: r.fields.cells.update(temperature=np.zeros((3, 4, 5))),
+         "fields/temperature: unknown field name; known fields: displacement, velocity, strain, stress, von_mises, "
+         "pressure"),
         (lambda r: setattr(r, "probe_points", None), "probes/displacement: the result has no probe_points"),
         (lambda r: setattr(r.steps[1], "time", 0.25),
          "steps/0001: time 0.25 must be finite and greater than the previous step's"),
