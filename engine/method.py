@@ -34,6 +34,10 @@ if TYPE_CHECKING:
 Setup = Callable[[str, float], None]
 
 
+def no_progress(part: str, share: float) -> None:
+    """The Setup of a caller that follows no progress."""
+
+
 @dataclass
 class State:
     """One solve's result: the method's unknowns ``u`` (its own layout: staggered [d, size] face

@@ -25,7 +25,7 @@ from ..errors import VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
 from ..material import Material
-from ..method import Setup, State
+from ..method import Setup, State, no_progress
 from ..solvers.direct import DirectSolver, NotPositiveDefinite
 from ..solvers.linear import SolveStats
 from . import assembly, warping
@@ -79,7 +79,7 @@ class DGElasticity(BoundaryTerms, Fields):
                                   f"the slicing has {self.cut.degree}")
         if self.penalty is None:
             self.penalty = DEFAULT_PENALTY[self.degree]
-        say = self.progress or (lambda part, share: None)
+        say = self.progress or no_progress
         say("elements and basis", 0.0)
         t = time.perf_counter()
         self.timings: dict[str, float] = {}

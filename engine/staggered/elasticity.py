@@ -25,7 +25,7 @@ from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
 from ..material import STRESS_FIELDS, Material, pressure, stress, von_mises
-from ..method import Setup, State
+from ..method import Setup, State, no_progress
 from ..output import FieldData
 from ..runtime import device_array
 from ..solvers.cg import PCG, SolverError, pcg
@@ -57,7 +57,7 @@ class StaggeredElasticity:
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
 
     def __post_init__(self) -> None:
-        say = self.progress or (lambda part, share: None)
+        say = self.progress or no_progress
         say("surface quadrature", 0.0)
         grid = self.fractions.grid
         self.grid, self.dim = grid, grid.dim

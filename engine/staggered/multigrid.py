@@ -20,7 +20,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ThinFeatureError
-from ..method import Setup
+from ..method import Setup, no_progress
 from ..grid import axis_pairs
 from ..runtime import device_array
 from ..solvers.cg import SolverError
@@ -66,7 +66,7 @@ class Multigrid:
     level's free DOFs or shift change."""
 
     def __init__(self, fine: Level, *, max_levels: int = 12, progress: Setup | None = None) -> None:
-        say = progress or (lambda part, share: None)
+        say = progress or no_progress
         self.levels = [fine]
         while len(self.levels) < max_levels:
             say(f"multigrid level {len(self.levels) + 1}", 0.4 * len(self.levels) / max_levels)
