@@ -275,6 +275,12 @@ def cmd_run(args) -> int:
         return _error(f"cannot write the result to '{args.output}': {exc.strerror or exc}")
     if note:
         print(f"warning: {note}", file=sys.stderr)
+    from .peaks import peaks
+
+    for place, peak in peaks(result).items():
+        at = ", ".join(f"{v:.4g}" for v in peak.location)
+        when = "" if peak.time is None else f" at t = {peak.time:.4g} s"
+        print(f"peak von Mises {peak.value:.4g} Pa in the {place} at ({at}) m{when}", file=sys.stderr)
     print(f"{path}")
     return 0
 

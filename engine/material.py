@@ -77,3 +77,19 @@ def pressure(sigma: np.ndarray, dim: int, lam: float | None = None, mu: float | 
     """Pressure p = -tr(sigma) / 3 [...] [Pa] of Voigt stresses [..., 6 | 3], positive in
     compression (2D: plane strain's sigma_zz included, see :func:`normal_stresses`)."""
     return -normal_stresses(sigma, dim, lam, mu).mean(axis=-1)
+
+
+def strain_fields(strain: np.ndarray, names: list[str] | tuple[str, ...], lam: float, mu: float, dim: int) -> dict[str, np.ndarray]:
+    """The requested ones of STRESS_FIELDS from Voigt strains [..., 6 | 3]: "strain" itself,
+    "stress" [..., 6 | 3] [Pa], "von_mises" and "pressure" [...] [Pa] (NaN strains stay NaN)."""
+    out: dict[str, np.ndarray] = {}
+    if "strain" in names:
+        out["strain"] = strain
+    if any(n in names for n in STRESS_FIELDS[1:]):
+        sigma = stress(strain, lam, mu, dim)
+        if "stress" in names:
+            out["stress"] = sigma
+        for name, of in (("von_mises", von_mises), ("pressure", pressure)):
+            if name in names:
+                out[name] = of(sigma, dim, lam, mu)
+    return out

@@ -42,12 +42,14 @@ def no_progress(part: str, share: float) -> None:
 class State:
     """One solve's result: the method's unknowns ``u`` (its own layout: staggered [d, size] face
     samples, DG [E, d, n] coefficients), the solve's statistics and wall time [s]; ``rotations``
-    [E, 3, 3] of corotated elements where the method warps its stiffness (else None)."""
+    [E, 3, 3] of corotated elements where the method warps its stiffness (else None);
+    ``load_scale``: the factor the surface loads had (the tractions the surface stress carries)."""
 
     u: np.ndarray
     stats: SolveStats
     seconds: float
     rotations: np.ndarray | None = None
+    load_scale: float = 1.0
 
 
 class Method(Protocol):

@@ -327,6 +327,7 @@ def _write_h5(f: h5py.File, r: Result, nodes: bool) -> None:
         steps = f.create_group("steps")
         for i, step in enumerate(r.steps):
             _write_level(steps.create_group(f"{i:04d}"), step, r, scales)
+    _write_peaks(f, r)
     if r.solver is not None:
         s = f.create_group("solver")
         s.attrs["iterations"] = int(r.solver.iterations)
@@ -334,6 +335,25 @@ def _write_h5(f: h5py.File, r: Result, nodes: bool) -> None:
         s.attrs["stage_times"] = json.dumps({k: float(v) for k, v in r.solver.stage_times.items()})
         s.attrs["stage_times_units"] = "s"
         s.attrs["warnings"] = np.array(r.solver.warnings, dtype=h5py.string_dtype())
+
+
+def _write_peaks(f: h5py.File, r: Result) -> None:
+    """/peak: the largest von Mises on the surface and in the volume (engine.peaks), where the
+    result holds a stress: attrs <place>_von_mises [Pa], <place>_location [d] [m] and, for a time
+    series, <place>_time [s]."""
+    from .peaks import peaks  # computed from the result itself (peaks imports this module)
+
+    found = peaks(r)
+    if not found:
+        return
+    g = f.create_group("peak")
+    g.attrs["units"] = "Pa"
+    g.attrs["location_units"] = "m"
+    for place, peak in found.items():
+        g.attrs[f"{place}_von_mises"] = peak.value
+        g.attrs[f"{place}_location"] = np.asarray(peak.location, dtype=np.float64)
+        if peak.time is not None:
+            g.attrs[f"{place}_time"] = float(peak.time)
 
 
 def _fsync_dir(directory: Path) -> None:

@@ -132,6 +132,7 @@ def run_task(task: Task, progress) -> tuple:
     from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
     from engine.output import outside_probes_warning, write_result
+    from engine.peaks import peaks
     from engine.pipeline import Limits, run
     from schemas import SpecError, parse_job
 
@@ -175,6 +176,7 @@ def run_task(task: Task, progress) -> tuple:
             "result_bytes": path.stat().st_size,
             "seconds": time.perf_counter() - t0,
             "grid": list(result.grid.shape),
+            "peak": {place: peak.as_dict() for place, peak in peaks(result).items()},
         }
         return ("done", summary)
     except SpecError as exc:

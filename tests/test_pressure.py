@@ -41,8 +41,9 @@ def test_pressure_is_minus_the_mean_normal_stress_positive_in_compression():
 
 
 def test_staggered_pressure_converges_on_the_thick_sphere():
-    # measured: relative L2 at the 1,200 probes 1.43e-1 at h = 1/8, 5.34e-2 at h = 1/16 (the cell
-    # stress is first order near the surfaces, issue 19); the probes' mean within 0.5% of the exact
+    # measured: relative L2 at the 1,200 probes 7.55e-2 at h = 1/8, 2.44e-2 at h = 1/16 (strains
+    # fitted at the probes, engine/staggered/recovery.py; the cell's value gave 1.43e-1, 5.34e-2);
+    # the probes' mean within 0.8% and 0.2% of the exact
     errors = []
     for h in (0.125, 0.0625):
         result, exact = run_lame({"kind": "staggered"}, h)
@@ -54,7 +55,7 @@ def test_staggered_pressure_converges_on_the_thick_sphere():
         cells = result.fields.cells
         solid = np.isfinite(cells["pressure"])
         np.testing.assert_allclose(cells["pressure"][solid], -cells["stress"][solid][:, :3].sum(axis=1) / 3, rtol=1e-12)
-    assert errors[1] < 0.5 * errors[0] and errors[1] < 6e-2, errors
+    assert errors[1] < 0.4 * errors[0] and errors[1] < 3.5e-2, errors
 
 
 def test_dg_pressure_converges_on_the_thick_sphere():

@@ -24,13 +24,13 @@ from ..errors import BoundaryError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
-from ..material import STRESS_FIELDS, Material, pressure, stress, von_mises
+from ..material import Material
 from ..method import Setup, State, no_progress
-from ..output import FieldData
 from ..runtime import device_array
 from ..solvers.cg import PCG, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
+from .fields import StaggeredFields
 from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
 from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
@@ -39,7 +39,7 @@ PointFunction = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass
-class StaggeredElasticity:
+class StaggeredElasticity(StaggeredFields):
     """The method on one geometry: built once (level, prescribed DOFs, loads, rigid-mode checks,
     multigrid), then solved as often as an analysis needs (``solve``; ``set_time_step`` for
     backward Euler) and turned into fields (``fields``). Units SI; ``rtol``, ``max_iterations``
@@ -286,7 +286,7 @@ class StaggeredElasticity:
         if self.modes:
             u = self._without_rigid_motion(self._project(u))
         u = u * level.free
-        return State(u, stats, time.perf_counter() - t0)
+        return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
 
     def _cg(self, inner: Callable) -> PCG:
         """CG on the operator, preconditioned by ``inner`` (then off the free rigid modes)."""
@@ -324,99 +324,6 @@ class StaggeredElasticity:
             flat[pos] -= q @ (q.T @ flat[pos])
         return flat.reshape(v.shape)
 
-    # ------------------------------------------------------------------ fields
-    def cell_fields(self, u: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
-        """Fields at cell centres [*grid.shape, c], NaN where a cell holds no material."""
-        lay, d, h = self.level.layout, self.dim, self.grid.spacing
-        shape = self.grid.shape
-        full = lay.dense(u)  # [d, *box]
-        solid = lay.dense(self.level.vc_host)[tuple(slice(0, n) for n in shape)] > 0
-        out: dict[str, np.ndarray] = {}
-        cut = tuple(slice(0, n) for n in shape)
-
-        def shifted(a: np.ndarray, offset) -> np.ndarray:
-            return a[tuple(slice(o, o + n) for o, n in zip(offset, shape))]
-
-        eye = np.eye(d, dtype=int)
-        if "displacement" in names:
-            disp = np.stack([0.5 * (full[a][cut] + shifted(full[a], eye[a])) for a in range(d)], axis=-1)
-            out["displacement"] = np.where(solid[..., None], disp, np.nan)
-        if any(n in names for n in STRESS_FIELDS):
-            strain = self._cell_strain(full, shifted, cut)
-            lam, mu = self.material.lame
-            if "strain" in names:
-                out["strain"] = np.where(solid[..., None], strain, np.nan)
-            if any(n in names for n in STRESS_FIELDS[1:]):
-                sigma = stress(strain, lam, mu, d)
-                if "stress" in names:
-                    out["stress"] = np.where(solid[..., None], sigma, np.nan)
-                for name, of in (("von_mises", von_mises), ("pressure", pressure)):
-                    if name in names:
-                        out[name] = np.where(solid, of(sigma, d, lam, mu), np.nan)
-        return out
-
-    def _cell_strain(self, full, shifted, cut) -> np.ndarray:
-        """Voigt strain [*shape, 6 | 3]: normal strains from the cell's own faces, shear strains as
-        the edge-fraction-weighted mean of the edges around the cell (edges outside the material
-        carry no energy, so their strain is meaningless)."""
-        lay, d, h = self.level.layout, self.dim, self.grid.spacing
-        eye = np.eye(d, dtype=int)
-        normal = [(shifted(full[a], eye[a]) - full[a][cut]) / h for a in range(d)]
-        shear = {}
-        for q, (a, b) in enumerate(axis_pairs(d)):
-            ua, ub = full[a], full[b]
-            edge = np.zeros_like(ua)
-            edge[tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))] = 0.5 * (
-                (ua - np.roll(ua, 1, axis=b)) + (ub - np.roll(ub, 1, axis=a))
-            )[tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))] / h
-            w = lay.dense(self.level.ve_host[q])
-            num = sum(shifted(edge * w, o) for o in _corners(d, a, b))
-            den = sum(shifted(w, o) for o in _corners(d, a, b))
-            plain = sum(shifted(edge, o) for o in _corners(d, a, b)) / 4
-            shear[(a, b)] = np.where(den > 0, num / np.where(den > 0, den, 1.0), plain)
-        order = [(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)]
-        return np.stack(normal + [shear[p] for p in order], axis=-1)
-
-    def point_displacement(self, u: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """Displacement [N, d] at points by interpolation of the active samples (NaN outside)."""
-        level = self.level
-
-        def lookup(a: int, index: np.ndarray):
-            pos = level.layout.positions(index)
-            ok = (pos >= 0) & level.active[a, np.maximum(pos, 0)]
-            return u[a, np.maximum(pos, 0)] * ok, ok
-
-        return sampling.interpolate(self.grid, np.asarray(points, dtype=float), lookup)
-
-    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
-               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
-        cells = self.cell_fields(state.u, names)
-        data = FieldData(cells=cells, time=time_value)
-        if velocity is not None and "velocity" in names:
-            data.cells["velocity"] = self.cell_fields(velocity, ["displacement"])["displacement"]
-        if probes is not None and len(probes):
-            data.probes = self._probe_fields(state.u, probes, cells, names, velocity)
-        if surface:
-            data.surface["displacement"] = self.point_displacement(state.u, self.surface.vertices)
-        return data
-
-    def _probe_fields(self, u, probes, cells, names, velocity) -> dict[str, np.ndarray]:
-        out = {}
-        probes = np.asarray(probes, dtype=float)
-        if "displacement" in names:
-            out["displacement"] = self.point_displacement(u, probes)
-        if velocity is not None and "velocity" in names:
-            out["velocity"] = self.point_displacement(velocity, probes)
-        cell = self.grid.cell_of(probes)
-        inside = np.all((cell >= 0) & (cell < np.asarray(self.grid.shape)), axis=1)
-        for name in STRESS_FIELDS:
-            if name in cells:
-                arr = cells[name]
-                vals = np.full((len(probes),) + arr.shape[self.dim:], np.nan)
-                vals[inside] = arr[tuple(cell[inside].T)]
-                out[name] = vals
-        return out
-
 
 def _shift(values: np.ndarray, axis: int, back: bool = False) -> np.ndarray:
     """out[I] = values[I - e_axis] (or values[I + e_axis] with back), zero beyond the box."""
@@ -428,11 +335,6 @@ def _shift(values: np.ndarray, axis: int, back: bool = False) -> np.ndarray:
         src[axis], dst[axis] = slice(0, -1), slice(1, None)
     out[tuple(dst)] = values[tuple(src)]
     return out
-
-
-def _corners(d: int, a: int, b: int) -> list[tuple[int, ...]]:
-    """Offsets of the four (a, b) edges around a cell."""
-    return [tuple((k == a) * i + (k == b) * j for k in range(d)) for i in (0, 1) for j in (0, 1)]
 
 
 class _Space:

@@ -1,0 +1,141 @@
+"""Fields of a staggered solution: at cell centres, at probes and on the surface.
+
+Cell values: displacement the mean of each cell's two face samples per component, strain the
+cell's own (normal strains from its faces, shear the fraction-weighted mean of its edges). Probes
+and surface vertices take the strain of :func:`recovery.fit_strain` (a linear fit of the cell
+strains around the point, second order inside the body) and displacement by interpolating the
+samples; surface stresses then carry the applied tractions (:mod:`engine.surface_stress`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..grid import axis_pairs
+from ..material import STRESS_FIELDS, strain_fields
+from ..output import FieldData
+from ..method import State
+from ..surface_stress import FacetTractions, facet_tractions, from_voigt, surface_fields
+from . import sampling
+from .recovery import fit_strain
+
+
+class StaggeredFields:
+    """Mixin of ``StaggeredElasticity``: needs ``level``, ``grid``, ``dim``, ``material``,
+    ``surface``, ``surface_loads`` and ``prescribed``."""
+
+    _tractions: FacetTractions | None = None
+
+    def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
+               time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
+        lam, mu = self.material.lame
+        d = self.dim
+        strain = self.cell_strain(state.u) if any(n in names for n in STRESS_FIELDS) else None
+        cells = self.cell_fields(state.u, names, strain)
+        data = FieldData(cells=cells, time=time_value)
+        if velocity is not None and "velocity" in names:
+            data.cells["velocity"] = self.cell_fields(velocity, ["displacement"])["displacement"]
+        if probes is not None and len(probes):
+            probes = np.asarray(probes, dtype=float)
+            if "displacement" in names:
+                data.probes["displacement"] = self.point_displacement(state.u, probes)
+            if velocity is not None and "velocity" in names:
+                data.probes["velocity"] = self.point_displacement(velocity, probes)
+            if strain is not None:
+                data.probes.update(strain_fields(self.point_strain(strain, probes), names, lam, mu, d))
+        if surface:
+            vertices = self.surface.vertices
+            data.surface["displacement"] = self.point_displacement(state.u, vertices)
+            if strain is not None:
+                raw = from_voigt(strain_fields(self.point_strain(strain, vertices), ["stress"], lam, mu, d)["stress"], d)
+                data.surface.update(surface_fields(self.surface, raw, names, (lam, mu), self.facet_tractions(),
+                                                   state.load_scale))
+        return data
+
+    def facet_tractions(self) -> FacetTractions:
+        """Which surface facets are free, loaded or held (computed once)."""
+        if self._tractions is None:
+            self._tractions = facet_tractions(self.surface, self.surface_loads, self.prescribed)
+        return self._tractions
+
+    def point_strain(self, strain: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Voigt strain [P, 6 | 3] at points [P, d] [m] from the cell strains [*shape, 6 | 3]."""
+        return fit_strain(self.grid, strain, self._trust(), points)
+
+    def _trust(self) -> np.ndarray:
+        """Per-cell weight [*shape] of a cell's strain in fits: its solid fraction."""
+        return self.level.layout.dense(self.level.vc_host)[tuple(slice(0, n) for n in self.grid.shape)]
+
+    def point_displacement(self, u: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacement [N, d] at points by interpolation of the active samples (NaN outside)."""
+        level = self.level
+
+        def lookup(a: int, index: np.ndarray):
+            pos = level.layout.positions(index)
+            ok = (pos >= 0) & level.active[a, np.maximum(pos, 0)]
+            return u[a, np.maximum(pos, 0)] * ok, ok
+
+        return sampling.interpolate(self.grid, np.asarray(points, dtype=float), lookup)
+
+    def cell_fields(self, u: np.ndarray, names: list[str], strain: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Fields at cell centres [*grid.shape, c], NaN where a cell holds no material; ``strain``:
+        the cell strains when already computed."""
+        d, shape = self.dim, self.grid.shape
+        full = self.level.layout.dense(u)  # [d, *box]
+        out: dict[str, np.ndarray] = {}
+        if "displacement" in names:
+            cut = tuple(slice(0, n) for n in shape)
+            eye = np.eye(d, dtype=int)
+            disp = np.stack([0.5 * (full[a][cut] + _shifted(full[a], eye[a], shape)) for a in range(d)], axis=-1)
+            out["displacement"] = np.where(self._solid()[..., None], disp, np.nan)
+        if any(n in names for n in STRESS_FIELDS):
+            strain = self.cell_strain(u) if strain is None else strain
+            lam, mu = self.material.lame
+            out.update(strain_fields(strain, names, lam, mu, d))
+        return out
+
+    def _solid(self) -> np.ndarray:
+        return self._trust() > 0
+
+    def cell_strain(self, u: np.ndarray) -> np.ndarray:
+        """Voigt strain [*shape, 6 | 3], NaN where a cell holds no material: normal strains from the
+        cell's own faces, shear strains as the edge-fraction-weighted mean of the edges around the
+        cell (edges outside the material carry no energy, so their strain is meaningless)."""
+        lay, d, h = self.level.layout, self.dim, self.grid.spacing
+        shape = self.grid.shape
+        full = lay.dense(u)
+        cut = tuple(slice(0, n) for n in shape)
+        eye = np.eye(d, dtype=int)
+        normal = [(_shifted(full[a], eye[a], shape) - full[a][cut]) / h for a in range(d)]
+        shear = {}
+        for q, (a, b) in enumerate(axis_pairs(d)):
+            ua, ub = full[a], full[b]
+            inner = tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))
+            edge = np.zeros_like(ua)
+            edge[inner] = 0.5 * ((ua - np.roll(ua, 1, axis=b)) + (ub - np.roll(ub, 1, axis=a)))[inner] / h
+            w = lay.dense(self.level.ve_host[q])
+            corners = _corners(d, a, b)
+            num = sum(_shifted(edge * w, o, shape) for o in corners)
+            den = sum(_shifted(w, o, shape) for o in corners)
+            plain = sum(_shifted(edge, o, shape) for o in corners) / 4
+            shear[(a, b)] = np.where(den > 0, num / np.where(den > 0, den, 1.0), plain)
+        order = [(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)]
+        strain = np.where(self._solid()[..., None], np.stack(normal + [shear[p] for p in order], axis=-1), np.nan)
+        # a cut cell's own strain reads samples outside the solid that only its sliver of energy
+        # determines: its value is the fit of its neighbourhood, weighted to the material
+        trust = self._trust()
+        cut_cells = np.argwhere((trust > 0) & (trust < 1))
+        if len(cut_cells):
+            centres = np.asarray(self.grid.origin) + (cut_cells + 0.5) * h
+            strain[tuple(cut_cells.T)] = fit_strain(self.grid, strain, trust, centres)
+        return strain
+
+
+def _shifted(a: np.ndarray, offset, shape) -> np.ndarray:
+    """a[I + offset] over the cells I of ``shape``."""
+    return a[tuple(slice(o, o + n) for o, n in zip(offset, shape))]
+
+
+def _corners(d: int, a: int, b: int) -> list[tuple[int, ...]]:
+    """Offsets of the four (a, b) edges around a cell."""
+    return [tuple((k == a) * i + (k == b) * j for k in range(d)) for i in (0, 1) for j in (0, 1)]
