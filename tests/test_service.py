@@ -78,6 +78,11 @@ def test_a_job_runs_end_to_end_and_matches_the_cli(server, tmp_path):
         assert f.attrs["format"] == "voxelastic-result"
         u = f["fields/displacement"][...]
         tip = f["probes/displacement"][0]
+        # the job status reports the peak von Mises the result file holds (engine.peaks)
+        for place in ("surface", "volume"):
+            peak = final["summary"]["peak"][place]
+            assert peak["value"] == pytest.approx(float(f["peak"].attrs[f"{place}_von_mises"]), rel=1e-12)
+            np.testing.assert_allclose(peak["location"], f["peak"].attrs[f"{place}_location"])
     assert u.shape == (18, 6, 6, 3)
     assert -0.06 < tip[2] < -0.02  # gravity + tip traction bend the free end down by ~4 cm
 
@@ -89,6 +94,7 @@ def test_a_job_runs_end_to_end_and_matches_the_cli(server, tmp_path):
                          capture_output=True, text=True, timeout=300,
                          env={**os.environ, "VOXELASTIC_CACHE_DIR": server.cache_dir})
     assert out.returncode == 0, out.stderr
+    assert "peak von Mises" in out.stderr and "in the surface at (" in out.stderr
     with h5py.File(tmp_path / "cli.h5") as f:
         np.testing.assert_allclose(u, f["fields/displacement"][...], rtol=1e-7, atol=1e-12)
 

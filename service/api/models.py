@@ -57,7 +57,9 @@ class JobOut(BaseModel):
     error_kind: Literal["input", "limit", "storage", "worker_lost", "internal", "cancelled"] | None = None
     result: ResultInfo | None = None
     spec: dict[str, Any] = Field(description="The validated job spec, defaults filled in.")
-    summary: dict[str, Any] = Field(default_factory=dict, description="Grid, facets, memory estimate, solver figures.")
+    summary: dict[str, Any] = Field(default_factory=dict, description=(
+        "Grid, facets, memory estimate, solver figures; when the result holds a stress, \"peak\": the largest von "
+        "Mises [Pa] on the surface and in the volume, each {value, location [m], time}."))
 
 
 class JobPage(BaseModel):
