@@ -184,3 +184,15 @@ def test_the_peak_is_reported_in_the_result_file_and_sits_where_the_stress_is_la
         assert g.attrs["units"] == "Pa"
         assert g.attrs["surface_von_mises"] == pytest.approx(found["surface"].value)
         np.testing.assert_allclose(g.attrs["volume_location"], found["volume"].location)
+
+
+def test_quasistatic_steps_carry_their_own_load_on_the_surface():
+    """Each load step's surface stress carries that step's traction: sigma_xx = k / n * 1e3 Pa."""
+    spec, mesh = bar_job({"kind": "staggered"}, 0.125)
+    spec["analysis"] = {"kind": "quasistatic", "steps": 4}
+    result = simulate(spec, mesh, filename="bar.stl", cache=GeometryCache(None))
+    assert len(result.steps) == 4
+    for k, step in enumerate(result.steps, start=1):
+        s = step.surface["stress"]
+        np.testing.assert_allclose(s[:, 0], 1e3 * k / 4, rtol=1e-9)
+        np.testing.assert_allclose(s[:, 1:], 0.0, atol=1e-6)
