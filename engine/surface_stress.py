@@ -6,7 +6,7 @@ element polynomial) says little about sigma n, which the boundary conditions kno
 on a free surface, the applied traction on a loaded patch. Each vertex's stress is therefore the
 symmetric tensor closest to the raw one (Frobenius norm) among those with sigma n = t for the
 facets around it whose traction is known: one condition with their mean normal and traction where
-the surface is smooth there, one per facet at a sharp edge or corner (:func:`recover`). On a flat free face that
+the surface is smooth there, one per face meeting at a sharp edge or corner (:func:`recover`). On a flat free face that
 replaces the normal row of sigma and keeps the in-plane stresses; at a free edge or corner it
 zeroes what both faces say. Facets of a displacement patch carry an unknown reaction and add no
 condition.
@@ -71,9 +71,9 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     Where those facets' normals lie within FEATURE_ANGLE of their area-weighted mean (a smooth
     surface, facetted) the vertex gets one condition: its mean normal and mean traction; asking it
     of every facet would pin the tangential stresses too (on a facetted sphere under pressure each
-    facet's tilted normal would add -p to the hoop stress). At a sharp edge or corner each facet
-    keeps its own condition, which is what the faces meeting there each say (``feature_angle`` 0:
-    every vertex is treated as sharp). The mean is weighted as in :func:`_normal_weights`."""
+    facet's tilted normal would add -p to the hoop stress). At a sharp edge or corner each face
+    meeting there (its facets within the angle of each other, :func:`_faces_at`) keeps a
+    condition of its own (``feature_angle`` 0: every facet is its own face). The mean is weighted as in :func:`_normal_weights`."""
     d = surface.dim
     raw = np.asarray(raw, dtype=float)
     m = len(surface.vertices)
@@ -100,12 +100,12 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     a_s, b_s = _conditions(mean_n[smooth], mean_t[smooth], d)
     lhs[smooth] += STIFF * a_s
     rhs[smooth] += STIFF * b_s
-    # sharp vertices: every incident facet's own condition, weighted by its share of the known area
-    sharp = ~smooth[corner_v] & (total[corner_v] > 0)
-    a_f, b_f = _conditions(normals[corner_f[sharp]], t[corner_f[sharp]], d)
-    share = weight[sharp] / total[corner_v[sharp]]
-    np.add.at(lhs, corner_v[sharp], STIFF * share[:, None, None] * a_f)
-    np.add.at(rhs, corner_v[sharp], STIFF * share[:, None] * b_f)
+    # sharp vertices: one condition per face meeting there (the facets whose normals lie within
+    # FEATURE_ANGLE of each other), with that face's mean normal and traction
+    sharp = np.nonzero(~smooth[corner_v] & (total[corner_v] > 0))[0]
+    if len(sharp):
+        _add_faces(lhs, rhs, corner_v[sharp], normals[corner_f[sharp]], t[corner_f[sharp]], weight[sharp], total,
+                   np.cos(np.radians(feature_angle)))
     # the raw stress in the Frobenius norm (in Voigt slots the shear counts twice)
     metric = np.concatenate([np.ones(d), 2 * np.ones(len(pairs))])
     s_raw = to_voigt(raw)
@@ -115,6 +115,44 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     out = np.full((m, nv), np.nan)
     out[good] = np.linalg.solve(lhs[good], rhs[good][..., None])[..., 0]
     return from_voigt(out, d)
+
+
+def _add_faces(lhs: np.ndarray, rhs: np.ndarray, vertex: np.ndarray, normals: np.ndarray, traction: np.ndarray,
+               weight: np.ndarray, total: np.ndarray, cos_angle: float) -> None:
+    """Add to the normal equations of sharp vertices one condition per face meeting there: the
+    incidences (vertex [N], facet normal [N, d], traction [N, d], weight [N]) grouped by
+    :func:`_faces_at`, each group with its mean normal and traction and its share of the weight."""
+    d = normals.shape[1]
+    group = _faces_at(vertex, normals, cos_angle)
+    g_w = np.bincount(group, weights=weight).astype(float)
+    g_n = np.stack([np.bincount(group, weights=weight * normals[:, j]) for j in range(d)], 1)
+    g_t = np.stack([np.bincount(group, weights=weight * traction[:, j]) for j in range(d)], 1)
+    g_v = np.zeros(len(g_w), dtype=np.int64)
+    g_v[group] = vertex
+    g_n /= np.maximum(np.linalg.norm(g_n, axis=1), 1e-300)[:, None]
+    a_f, b_f = _conditions(g_n, g_t / np.maximum(g_w, 1e-300)[:, None], d)
+    share = g_w / total[g_v]
+    np.add.at(lhs, g_v, STIFF * share[:, None, None] * a_f)
+    np.add.at(rhs, g_v, STIFF * share[:, None] * b_f)
+
+
+def _faces_at(vertex: np.ndarray, normals: np.ndarray, cos_angle: float) -> np.ndarray:
+    """Group id [N] of each incidence (its vertex [N], facet normal [N, d]): greedily, the first
+    ungrouped incidence of a vertex seeds a group that takes every ungrouped incidence of that
+    vertex whose normal is within the angle of the seed's; a box corner gives 3 groups, a hole's
+    rim 2 (its wall's facets turning by a degree each stay one)."""
+    group = np.full(len(vertex), -1, dtype=np.int64)
+    next_id = 0
+    while (group < 0).any():
+        open_ = np.nonzero(group < 0)[0]
+        seed = np.full(vertex.max() + 1, len(vertex), dtype=np.int64)
+        np.minimum.at(seed, vertex[open_], open_)
+        s = seed[vertex[open_]]
+        join = (np.einsum("ij,ij->i", normals[open_], normals[s]) >= cos_angle) | (open_ == s)  # a seed joins its own
+        ids = np.unique(vertex[open_][join], return_inverse=True)[1]
+        group[open_[join]] = next_id + ids
+        next_id += int(ids.max()) + 1 if len(ids) else 0
+    return group
 
 
 def _normal_weights(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
