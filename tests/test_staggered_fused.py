@@ -52,18 +52,19 @@ def clamped(d):
     return lev
 
 
+@pytest.mark.parametrize("kind", [kn.LINEAR, kn.FACE])
 @pytest.mark.parametrize("d", [2, 3])
-def test_gathered_restriction_equals_the_scatter(d, rng):
+def test_gathered_restriction_equals_the_scatter(d, kind, rng):
     fine = make_fine_level(fractions(d), LAM, MU)
     coarse = make_coarse_level(fine)
     f = kept(fine, rng.standard_normal((d, fine.size)))
     want = coarse.zeros()
     kn.fill(d, want, 0.0)
-    kn.restrict_add(d, ti.f64, fine.coords, device_array(fine.layout.parents(coarse.layout)), coarse.layout.count,
-                    device_array(f), want)
+    kn.restrict_add(d, kind, ti.f64, fine.coords, device_array(fine.layout.parents(coarse.layout)),
+                    coarse.layout.count, device_array(f), want)
     mask = kept(coarse, rng.random((d, coarse.size)))
     got = coarse.zeros()
-    kn.restrict(d, coarse.coords, device_array(coarse.layout.children(fine.layout)), device_array(mask),
+    kn.restrict(d, kind, coarse.coords, device_array(coarse.layout.children(fine.layout)), device_array(mask),
                 device_array(f), got)
     want = want.to_numpy() * mask
     assert np.abs(want).max() > 1.0

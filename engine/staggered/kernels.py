@@ -276,10 +276,24 @@ def coarse_fractions(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.type
             ve[q, p] = stored(ve, e / 2**d)
 
 
+# Transfers between levels (compile-time kinds). LINEAR: multilinear interpolation of each component
+# on its own faces. FACE: linear along the component's axis, constant across it (the lowest-order
+# Raviart-Thomas interpolation): a fine face inside a coarse face takes its value, one inside a
+# coarse cell the mean of the cell's two faces, so the divergence of the prolonged field in every
+# fine cell is the divergence of its coarse cell (what the near-incompressible smoothing needs).
+LINEAR, FACE = 0, 1
+
+
+def _corner_used(kind: int, a: int, corner: int, d: int) -> bool:
+    """Whether ``corner`` (bit k: second coarse sample along axis k) of the a-component's
+    interpolation can carry weight: FACE reads one coarse sample across the component's axis."""
+    return kind == LINEAR or all((corner >> k) & 1 == 0 for k in range(d) if k != a)
+
+
 @ti.func
-def prolongation_weights(d: ti.template(), a: ti.template(), I, corner: ti.i32):
+def prolongation_weights(d: ti.template(), a: ti.template(), I, corner: ti.template(), kind: ti.template()):
     """Coarse index and weight of corner ``corner`` (bit k: second coarse sample along axis k) of
-    the multilinear interpolation of the a-component at fine index I."""
+    the interpolation ``kind`` of the a-component at fine index I."""
     J = ti.Vector([0] * d, dt=ti.i32)
     w = 1.0
     for k in ti.static(range(d)):
@@ -291,6 +305,8 @@ def prolongation_weights(d: ti.template(), a: ti.template(), I, corner: ti.i32):
                 w *= 1.0 - second
             else:
                 w *= 0.5
+        elif ti.static(kind == FACE):
+            J[k] = I[k] >> 1  # the coarse face (cell) the fine sample lies in
         else:
             # samples sit at cell centres: fine 2j -> 3/4 coarse j, 1/4 coarse j-1; 2j+1 -> j, j+1
             odd = I[k] & 1
@@ -312,23 +328,25 @@ def parent_address(d: ti.template(), parents: ti.types.ndarray(), coords: ti.typ
 
 
 @ti.kernel
-def prolong_add(d: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
+def prolong_add(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
                 mask: ti.types.ndarray(), coarse: ti.types.ndarray(), x: ti.types.ndarray()):
-    """x += mask P coarse (P: multilinear interpolation of each component on its own faces)."""
+    """x += mask P coarse (P: the interpolation ``kind``, LINEAR or FACE, of each component on its
+    own faces)."""
     for t, l in ti.ndrange(coords.shape[0], B**d):
         I = index_of(d, coords, t, l)
         p = t * (B**d) + l
         for a in ti.static(range(d)):
             v = 0.0
             for corner in ti.static(range(2**d)):  # unrolled: 25% faster than a runtime loop
-                J, w = prolongation_weights(d, a, I + 2, corner)
-                v += w * coarse[a, parent_address(d, parents, coords, t, J)]
+                if ti.static(_corner_used(kind, a, corner, d)):
+                    J, w = prolongation_weights(d, a, I + 2, corner, kind)
+                    v += w * coarse[a, parent_address(d, parents, coords, t, J)]
             x[a, p] = stored(x, x[a, p] + mask[a, p] * v)  # a plain store: no atomic, each p has one writer
 
 
 @ti.kernel
-def restrict_add(d: ti.template(), dtype: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
-                 zero: ti.i32, fine: ti.types.ndarray(), out: ti.types.ndarray()):
+def restrict_add(d: ti.template(), kind: ti.template(), dtype: ti.template(), coords: ti.types.ndarray(),
+                 parents: ti.types.ndarray(), zero: ti.i32, fine: ti.types.ndarray(), out: ti.types.ndarray()):
     """out += P^T fine, scattered from the fine DOFs with the prolongation's own weights (so the
     restriction is its exact transpose); nothing lands in the coarse zero tile (``zero``, the
     coarse tile count). ``dtype``: the arrays' float type. Callers zero ``out`` first, mask after."""
@@ -338,37 +356,49 @@ def restrict_add(d: ti.template(), dtype: ti.template(), coords: ti.types.ndarra
         for a in ti.static(range(d)):
             r = fine[a, p]
             if r != 0.0:
-                for corner in range(2**d):
-                    J, w = prolongation_weights(d, a, I + 2, corner)
-                    q = parent_address(d, parents, coords, t, J)
-                    if w != 0.0 and q < zero * (B**d):
-                        ti.atomic_add(out[a, q], ti.cast(w * r, dtype))
+                for corner in ti.static(range(2**d)):
+                    if ti.static(_corner_used(kind, a, corner, d)):
+                        J, w = prolongation_weights(d, a, I + 2, corner, kind)
+                        q = parent_address(d, parents, coords, t, J)
+                        if w != 0.0 and q < zero * (B**d):
+                            ti.atomic_add(out[a, q], ti.cast(w * r, dtype))
 
 
-def _offsets(d: int, a: int) -> list[tuple[int, ...]]:
+def _across(kind: int) -> range:
+    """Offsets g across the component's axis that a coarse DOF collects (see :func:`_offsets`)."""
+    return range(4) if kind == LINEAR else range(1, 3)
+
+
+def _offsets(d: int, a: int, kind: int) -> list[tuple[int, ...]]:
     """Offsets g (per axis, of fine I = 2 J - 3 + g) of the fine DOFs that coarse DOF J of
-    component a collects, axes 1..d-1: g in {0, 1, 2} along the component's axis, {0..3} across."""
-    return list(itertools.product(*[range(3 if k == a else 4) for k in range(1, d)]))
+    component a collects, axes 1..d-1: g in {0, 1, 2} along the component's axis; across it
+    {0..3} (LINEAR) or {1, 2} (FACE)."""
+    return list(itertools.product(*[range(3) if k == a else _across(kind) for k in range(1, d)]))
 
 
-def _restriction_weight(a: int, g: tuple[int, ...]) -> float:
+def _restriction_weight(a: int, g: tuple[int, ...], kind: int) -> float:
     """Interpolation weight of the fine DOF at offsets g (one per axis, see :func:`restrict`) for
-    component a: the product of 1/2, 1, 1/2 along the component's axis, 1/4, 3/4, 3/4, 1/4 across."""
+    component a: the product of 1/2, 1, 1/2 along the component's axis and, across it, 1/4, 3/4,
+    3/4, 1/4 (LINEAR) or 1 (FACE)."""
     w = 1.0
     for k, gk in enumerate(g):
-        w *= (1.0 if gk == 1 else 0.5) if k == a else (0.75 if gk in (1, 2) else 0.25)
+        if k == a:
+            w *= 1.0 if gk == 1 else 0.5
+        elif kind == LINEAR:
+            w *= 0.75 if gk in (1, 2) else 0.25
     return w
 
 
 @ti.kernel
-def restrict(d: ti.template(), coords: ti.types.ndarray(), children: ti.types.ndarray(), mask: ti.types.ndarray(),
-             fine: ti.types.ndarray(), out: ti.types.ndarray()):
+def restrict(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(), children: ti.types.ndarray(),
+             mask: ti.types.ndarray(), fine: ti.types.ndarray(), out: ti.types.ndarray()):
     """out = mask P^T fine at every kept coarse position (``coords`` the coarse tiles; ``children``
-    [nt, 3^d] the fine tiles around 2 T, see ``TileLayout.children``). A gather with the weights of
-    :func:`prolongation_weights` read backwards: coarse J collects fine I + 2 = 2 J + o with o in
-    {-1, 0, 1} (weights 1/2, 1, 1/2) along the component's axis and o in {-1, 0, 1, 2} (1/4, 3/4,
-    3/4, 1/4) across it. The scatter (:func:`restrict_add`) needs an atomic per fine DOF and
-    corner and was as slow as an operator apply; this is 4-5x faster. The per-axis address parts
+    [nt, 3^d] the fine tiles around 2 T, see ``TileLayout.children``), P the interpolation ``kind``.
+    A gather with the weights of :func:`prolongation_weights` read backwards: coarse J collects
+    fine I + 2 = 2 J + o with o in {-1, 0, 1} (weights 1/2, 1, 1/2) along the component's axis and,
+    across it, o in {-1, 0, 1, 2} (1/4, 3/4, 3/4, 1/4; LINEAR) or {0, 1} (1; FACE). The scatter
+    (:func:`restrict_add`) needs an atomic per fine DOF and corner and was as slow as an operator
+    apply; this is 4-5x faster. The per-axis address parts
     are computed once per position; the taps are unrolled over the static offsets (a runtime loop
     over them was 4x slower: the address parts were recomputed in it)."""
     for t, l in ti.ndrange(coords.shape[0], B**d):
@@ -384,14 +414,14 @@ def restrict(d: ti.template(), coords: ti.types.ndarray(), children: ti.types.nd
                 locs[k, g] = (I & (B - 1)) * (B ** (d - 1 - k))
         for a in ti.static(range(d)):
             v = 0.0
-            for g0 in ti.static(range(3 if a == 0 else 4)):
-                for rest in ti.static(_offsets(d, a)):
+            for g0 in ti.static(range(3) if a == 0 else _across(kind)):
+                for rest in ti.static(_offsets(d, a, kind)):
                     code = codes[0, g0]
                     loc = locs[0, g0]
                     for k in ti.static(range(1, d)):
                         code += codes[k, rest[k - 1]]
                         loc += locs[k, rest[k - 1]]
-                    w = ti.static(_restriction_weight(a, (g0,) + rest))
+                    w = ti.static(_restriction_weight(a, (g0,) + rest, kind))
                     v += w * fine[a, children[t, code] * (B**d) + loc]
             out[a, p] = stored(out, mask[a, p] * v)
 
