@@ -521,6 +521,29 @@ def make_coarse_level(fine: Level) -> Level:
     return coarse
 
 
+def _vertex_tiles(layout: TileLayout, active: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """[count] bool: the tiles holding a vertex V = I + o (o in {0, 1}^d) of an active face I of a
+    kept tile, where the vertex-patch smoothing (``patches.py``) stores V's patch: the tiles above
+    a kept tile's last layers (~3% more tiles on the 64^3 shell; they hold no material)."""
+    d = layout.dim
+    act = active.reshape((d, -1) + (TILE,) * d)[:, : layout.count] & keep.reshape((1, -1) + (1,) * d)
+    out = np.zeros(layout.count, dtype=bool)
+    shape = np.asarray(layout.tile_map.shape)
+    for s in itertools.product((0, 1), repeat=d):
+        # an a-face's patches are at I + o with o_a = 0: on the last layer along every axis of s
+        # (not a), it reaches the tile T + s
+        comps = [a for a in range(d) if not s[a]]
+        if not any(s) or not comps:
+            continue
+        view = act[(comps, slice(None)) + tuple(TILE - 1 if sk else slice(None) for sk in s)]
+        tiles = np.nonzero(view.reshape(len(comps), layout.count, -1).any(axis=(0, 2)))[0]
+        up = layout.coords[tiles].astype(np.int64) + np.asarray(s)
+        inside = np.all(up < shape, axis=1)
+        t = layout.tile_map[tuple(up[inside].T)]
+        out[t[t < layout.count]] = True
+    return out
+
+
 def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: float, dtype: type | None,
             active: np.ndarray | None = None) -> Level:
     """Drop the tiles holding no active DOF and no material, then build the level (``active``
@@ -532,6 +555,7 @@ def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: floa
         active = found.astype(bool)
     keep = active.reshape(d, -1, ts)[:, : layout.count].any(axis=(0, 2))
     keep |= (vc.reshape(-1, ts)[: layout.count] > 0).any(axis=1)
+    keep |= _vertex_tiles(layout, active, keep)
     if not keep.all():
         layout, order = layout.select(keep)
         vc, ve, vf, active = (reorder(v, order, ts) for v in (vc, ve, vf, active))

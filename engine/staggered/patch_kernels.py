@@ -54,27 +54,8 @@ def _corners(d: int) -> list[tuple[int, ...]]:
     return list(itertools.product((0, 1), repeat=d))
 
 
-def _pairs(d: int) -> list[tuple[int, int]]:
-    """All (a, b) in range(d)^2."""
-    return list(itertools.product(range(d), repeat=2))
-
-
-def _neg(o: tuple[int, ...]) -> tuple[int, ...]:
-    return tuple(-x for x in o)
-
-
-def _cleared(o: tuple[int, ...], a: int) -> tuple[int, ...]:
-    """o with its a-th entry 0."""
-    return tuple(0 if k == a else x for k, x in enumerate(o))
-
-
 def _minus(o: tuple[int, ...], o2: tuple[int, ...]) -> tuple[int, ...]:
     return tuple(x - y for x, y in zip(o, o2))
-
-
-def _sign(o: tuple[int, ...], a: int, b: int) -> float:
-    """Product of the cell strain coefficients' signs of components a and b (+1 at a high face)."""
-    return (1.0 if o[a] else -1.0) * (1.0 if o[b] else -1.0)
 
 
 def _code(d: int, offset: tuple[int, ...]) -> int:
@@ -111,45 +92,6 @@ def block(d: ti.template(), nbr: ti.types.ndarray(), p: ti.i32):
     return out
 
 
-@ti.kernel
-def patch_matrices(d: ti.template(), nbr: ti.types.ndarray(), verts: ti.types.ndarray(), vc: ti.types.ndarray(),
-                   ve: ti.types.ndarray(), mask: ti.types.ndarray(), mass: ti.types.ndarray(), shift: float,
-                   lam: float, mu: float, h: float, out: ti.types.ndarray()):
-    """out[i] [m, m] = the block of K + shift M on the patch of vertex verts[i] (masked slots: a
-    unit row and column). Cell terms: the 2^d cells V - o, each reading one face per component
-    (coefficient -1/h at its low face, +1/h at its high face); shear terms: the edges (a, b) whose
-    stencil reads a patch face (:func:`_edge_terms`)."""
-    m = ti.static(d * 2 ** (d - 1))
-    for i in range(verts.shape[0]):
-        near = block(d, nbr, verts[i])
-        scale = h ** (d - 2)
-        for r in ti.static(range(m)):
-            for c in ti.static(range(m)):
-                out[i, r, c] = stored(out, 0.0)
-        for o in ti.static(_corners(d)):
-            w = scale * vc[near[ti.static(_code(d, _neg(o)))]]
-            for a, b in ti.static(_pairs(d)):
-                ia = ti.static(_slot(d, a, _cleared(o, a)))
-                ib = ti.static(_slot(d, b, _cleared(o, b)))
-                sign = ti.static(_sign(o, a, b))
-                out[i, ia, ib] += stored(out, w * sign * (lam + (2.0 * mu if a == b else 0.0)))
-        for q in ti.static(range(len(PAIRS[d]))):
-            for offset, taps in ti.static(_edge_terms(d, q)):
-                w = scale * mu * ve[q, near[ti.static(_code(d, offset))]]
-                for si, ci in ti.static(taps):
-                    for sj, cj in ti.static(taps):
-                        out[i, si, sj] += stored(out, w * ci * cj)
-        for a, o, s in ti.static(_patch_dofs(d)):
-            pos = near[ti.static(_code(d, _neg(o)))]
-            out[i, s, s] += stored(out, shift * mass[a, pos])
-        for a, o, s in ti.static(_patch_dofs(d)):
-            if mask[a, near[ti.static(_code(d, _neg(o)))]] == 0:
-                for j in ti.static(range(m)):
-                    out[i, s, j] = stored(out, 0.0)
-                    out[i, j, s] = stored(out, 0.0)
-                out[i, s, s] = stored(out, 1.0)
-
-
 def _edge_terms(d: int, q: int) -> list[tuple[tuple[int, ...], list[tuple[int, float]]]]:
     """The shear edges of pair q that read a patch face: (edge offset from V, [(slot, coefficient)]
     of the patch faces it reads), coefficients of 2 eps_ab = u_a(E) - u_a(E - e_b) + u_b(E) -
@@ -180,12 +122,13 @@ def _edge_terms(d: int, q: int) -> list[tuple[tuple[int, ...], list[tuple[int, f
     return out
 
 
-# What schwarz_step does with z = mask M^-1 r (compile-time modes).
+# What schwarz_step does with z = mask M^-1 r (a runtime argument: one compiled kernel; the 3D one
+# takes ~5 s to compile, the unrolled 144 products of the gather).
 START, STEP, APPLY = 0, 1, 2
 
 
 @ti.kernel
-def schwarz_step(d: ti.template(), mode: ti.template(), n: ti.i32, nbr: ti.types.ndarray(),
+def schwarz_step(d: ti.template(), mode: ti.i32, n: ti.i32, nbr: ti.types.ndarray(),
                  cmap: ti.types.ndarray(), inv: ti.types.ndarray(), mask: ti.types.ndarray(),
                  r: ti.types.ndarray(), x: ti.types.ndarray(), step: ti.types.ndarray(), c1: float, c2: float):
     """z = mask M^-1 r with M^-1 = sum_V R_V^T inv_V R_V (additive Schwarz over vertex patches),
@@ -210,10 +153,10 @@ def schwarz_step(d: ti.template(), mode: ti.template(), n: ti.i32, nbr: ti.types
                             off = ti.static(_minus(o, o2))
                             z += inv[k, row, s] * rv[ti.static(b * 3**d + _code(d, off))]
                 z *= mask[a, p]
-            if ti.static(mode == START):
+            if mode == START:
                 step[a, p] = stored(step, c2 * z)
                 x[a, p] = stored(x, c2 * z)
-            elif ti.static(mode == STEP):
+            elif mode == STEP:
                 s_ = c1 * step[a, p] + c2 * z
                 step[a, p] = stored(step, s_)
                 x[a, p] = stored(x, x[a, p] + s_)

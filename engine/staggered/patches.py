@@ -24,6 +24,9 @@ import scipy.ndimage as ndi
 from ..runtime import device_array
 from . import patch_kernels
 from .operator import Level
+from .patch_kernels import _code, _corners, _cube, _edge_terms, _patch_dofs, _slot
+
+CHUNK = 65_536  # vertices per pass of the host assembly (~75 MB of [m, m] blocks in 3D)
 
 
 class VertexPatches:
@@ -87,14 +90,11 @@ class VertexPatches:
         return flat_has, flat_bad
 
     def _matrices(self, verts: np.ndarray) -> np.ndarray:
-        """[len(verts), m, m] the patch blocks of K + shift M (f64, host)."""
-        level = self.level
+        """[len(verts), m, m] the patch blocks of K + shift M (f64, host), in chunks."""
         out = np.zeros((len(verts), self.m, self.m))
-        if len(verts):
-            mass = level.mass.to_numpy() if level.mass is not None else np.zeros((level.dim, level.size))
-            patch_kernels.patch_matrices(level.dim, level.layout.neighbours(), verts, level.vc_host, level.ve_host,
-                                         level.free.astype(np.float64), mass, level.shift, level.lam, level.mu,
-                                         level.spacing, out)
+        for start in range(0, len(verts), CHUNK):
+            part = slice(start, start + CHUNK)
+            out[part] = patch_matrices(self.level, verts[part])
         return out
 
     def _with_surface(self, mats: np.ndarray, verts: np.ndarray, dofs) -> np.ndarray:
@@ -123,6 +123,51 @@ class VertexPatches:
         lv = self.level
         patch_kernels.schwarz_step(lv.dim, mode, lv.layout.count * lv.layout.tile_size, lv.nbr, self.cmap,
                                    self.inv, lv.mask, r, x, step, c1, c2)
+
+
+def patch_matrices(level: Level, verts: np.ndarray) -> np.ndarray:
+    """[n, m, m] the block of K + shift M (f64) on the patch of each vertex at the flat positions
+    ``verts`` [n]; a slot whose face is not free gets a unit row and column. Cell terms: the 2^d
+    cells V - o, each reading one face per component (-1/h at its low face, +1/h at its high face):
+    h^{d-2} Vc (2 mu delta_ab + lambda) s_a s_b; shear terms: the edges (a, b) whose stencil reads a
+    patch face (``patch_kernels._edge_terms``), h^{d-2} mu Ve c_i c_j."""
+    d, lay = level.dim, level.layout
+    m = d * 2 ** (d - 1)
+    index = lay.indices()[verts]
+    near = {}
+    for o in _cube(d):
+        pos = lay.positions(index + np.asarray(o))
+        near[_code(d, o)] = (np.maximum(pos, 0), pos >= 0)
+
+    def read(values: np.ndarray, o: tuple[int, ...]) -> np.ndarray:
+        pos, kept = near[_code(d, o)]
+        return np.where(kept, values[pos], 0.0)
+
+    scale = level.spacing ** (d - 2)
+    lam, mu = level.lam, level.mu
+    out = np.zeros((len(verts), m, m))
+    for o in _corners(d):
+        w = scale * read(level.vc_host, tuple(-x for x in o))
+        for a, b in itertools.product(range(d), repeat=2):
+            ia = _slot(d, a, tuple(0 if k == a else x for k, x in enumerate(o)))
+            ib = _slot(d, b, tuple(0 if k == b else x for k, x in enumerate(o)))
+            sign = (1.0 if o[a] else -1.0) * (1.0 if o[b] else -1.0)
+            out[:, ia, ib] += w * (sign * (lam + (2.0 * mu if a == b else 0.0)))
+    for q in range(len(level.ve_host)):
+        for offset, taps in _edge_terms(d, q):
+            w = (scale * mu) * read(level.ve_host[q], offset)
+            for (si, ci), (sj, cj) in itertools.product(taps, repeat=2):
+                out[:, si, sj] += w * (ci * cj)
+    mass = level.mass.to_numpy() if (level.shift != 0.0 and level.mass is not None) else None
+    for a, o, s in _patch_dofs(d):
+        back = tuple(-x for x in o)
+        if mass is not None:
+            out[:, s, s] += level.shift * read(mass[a], back)
+        masked = read(level.free[a].astype(np.float64), back) == 0
+        out[masked, s, :] = 0.0
+        out[masked, :, s] = 0.0
+        out[masked, s, s] = 1.0
+    return out
 
 
 def _shifted(a: np.ndarray, offset: tuple[int, ...]) -> np.ndarray:
