@@ -13,10 +13,11 @@ rigid modes of floating bodies bordered out.
 
 Near incompressibility (lambda / mu above ROBUST_RATIO) point smoothing cannot reduce the
 divergence-free errors the lambda (div u)^2 term leaves nearly unpenalised: the levels are then
-smoothed by Chebyshev iteration on M^-1 A with M^-1 the vertex-patch Schwarz operator
-(``patches.py``), and the transfers are the face interpolation (``kernels.FACE``), which keeps
-the divergence of every fine cell equal to its coarse cell's. Both are needed: either alone left
-the free thick sphere at 210 and 1,529 iterations at nu = 0.4999 (docs/design-notes.md).
+smoothed by Chebyshev iteration on M^-1 A with M^-1 = D^-1 + C Theta^-1 C^T, Jacobi on the faces
+and on the discrete curls (``curls.py``), and the transfers are the face interpolation
+(``kernels.FACE``), which keeps the divergence of every fine cell equal to its coarse cell's. Both
+are needed: either alone left the free thick sphere at hundreds of iterations at nu = 0.4999
+(docs/design-notes.md).
 """
 
 from __future__ import annotations
@@ -32,10 +33,10 @@ from ..grid import axis_pairs
 from ..runtime import device_array
 from ..solvers.cg import SolverError
 from ..solvers.rigid import free_modes
-from . import assembly, kernels, patch_kernels
+from . import assembly, kernels, smoother_kernels
 from .nitsche import make_surface_operator
 from .operator import Level, Mechanisms, describe_thin_features, dof_bodies, make_coarse_level, unheld_groups
-from .patches import VertexPatches
+from .curls import CurlSmoother
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -67,10 +68,10 @@ BAND_SPREAD = 30.0
 # iterations rose (sphere 128^3 clamped below -0.7, degree-5 smoothing with the band: 31 with
 # "any", 14 with 1/4, 16 with 1/2).
 FIXED_SHARE = 0.25
-# Above this lambda / mu the levels are smoothed on vertex patches (nu = 0.4: lambda / mu = 4).
+# Above this lambda / mu the levels are smoothed on the curls too (nu = 0.4: lambda / mu = 4).
 ROBUST_RATIO = 4.0
-PATCH_DEGREE = 3  # Chebyshev steps on M^-1 A (patch smoothing) before and after the coarse correction
-PATCH_SPREAD = 6.0
+CURL_DEGREE = 6  # Chebyshev steps on M^-1 A (curl smoothing) before and after the coarse correction
+CURL_SPREAD = 20.0
 
 
 class Multigrid:
@@ -80,7 +81,7 @@ class Multigrid:
     def __init__(self, fine: Level, *, max_levels: int = 12, progress: Setup | None = None,
                  robust: bool | None = None) -> None:
         say = progress or no_progress
-        # vertex-patch smoothing and face transfers (near incompressibility; default by lambda / mu)
+        # curl smoothing and face transfers (near incompressibility; default by lambda / mu)
         self.robust = fine.lam > ROBUST_RATIO * fine.mu if robust is None else bool(robust)
         self.kind = kernels.FACE if self.robust else kernels.LINEAR
         self.levels = [fine]
@@ -101,7 +102,7 @@ class Multigrid:
         self.children = [device_array(lv.layout.children(up.layout)) for up, lv in zip(self.levels, self.levels[1:])]
         # per level: the residual (which is also the Chebyshev step), and the rhs / solution it
         # receives from the level above (the finest level's come from the caller)
-        # (the patch smoothing keeps its step apart from the residual: one more array per level)
+        # (the curl smoothing keeps its step apart from the residual: one more array per level)
         extra = 1 if self.robust else 0
         self.work = [tuple(lv.zeros() for _ in range((3 if k else 1) + extra)) for k, lv in enumerate(self.levels)]
         say("multigrid smoothers and coarsest factor", 0.5)  # the first job in a process compiles kernels here
@@ -132,12 +133,12 @@ class Multigrid:
                 lv.set_shift(fine.shift, fine.density)
         self.coarse = CoarseSolver(self.levels[-1])
         if self.robust:
-            self.patches = [VertexPatches(lv) for lv in self.levels[:-1]]
-            self.bounds = [_largest_patch_eigenvalue(lv, pt, *self.work[k][:2]) * MARGIN
-                           for k, (lv, pt) in enumerate(zip(self.levels, self.patches))]
+            self.curls = [CurlSmoother(lv) for lv in self.levels[:-1]]
+            self.bounds = [_largest_curl_eigenvalue(lv, sm, *self.work[k][:2]) * MARGIN
+                           for k, (lv, sm) in enumerate(zip(self.levels, self.curls))]
             self.bands = [None] * (len(self.levels) - 1)
         else:
-            self.patches = None
+            self.curls = None
             self.bounds = [_largest_eigenvalue(lv, self.work[k][0]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
             self.bands = [boundary_band(lv) for lv in self.levels[:-1]]
 
@@ -164,7 +165,7 @@ class Multigrid:
         """Pre-smoothing (``first``: x is zero on entry) is the interior steps then the band's;
         post-smoothing the same in reverse order, so the cycle stays symmetric."""
         if self.robust:
-            self._patch_chebyshev(k, b, x, first)
+            self._curl_chebyshev(k, b, x, first)
             return
         lv = self.levels[k]
         band = self.bands[k]
@@ -196,31 +197,32 @@ class Multigrid:
             rho = rho_next
 
 
-    def _patch_chebyshev(self, k: int, b, x, first: bool) -> None:
-        """PATCH_DEGREE steps of Chebyshev iteration on M^-1 A (M^-1 the vertex-patch Schwarz
-        operator), eigenvalues taken in [upper / PATCH_SPREAD, upper]; ``first``: x is zero on entry."""
-        lv, patches = self.levels[k], self.patches[k]
+    def _curl_chebyshev(self, k: int, b, x, first: bool) -> None:
+        """CURL_DEGREE steps of Chebyshev iteration on M^-1 A (M^-1: Jacobi on the faces and the
+        curls, ``curls.py``), eigenvalues taken in [upper / CURL_SPREAD, upper]; ``first``: x is
+        zero on entry. The smoothing is symmetric, so pre- and post-smoothing are the same."""
+        lv, smoother = self.levels[k], self.curls[k]
         r, step = self.work[k][0], self.work[k][-1]
         upper = self.bounds[k]
-        lower = upper / PATCH_SPREAD
+        lower = upper / CURL_SPREAD
         theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
         sigma = theta / delta
         rho = 1.0 / sigma
         if first:
-            patches.apply(patch_kernels.START, b, x, step, 0.0, 1.0 / theta)
+            smoother.apply(smoother_kernels.START, b, x, step, 0.0, 1.0 / theta)
         else:
             lv.residual(x, b, r)
-            patches.apply(patch_kernels.STEP, r, x, step, 0.0, 1.0 / theta)
-        for _ in range(PATCH_DEGREE - 1):
+            smoother.apply(smoother_kernels.STEP, r, x, step, 0.0, 1.0 / theta)
+        for _ in range(CURL_DEGREE - 1):
             rho_next = 1.0 / (2.0 * sigma - rho)
             lv.residual(x, b, r)
-            patches.apply(patch_kernels.STEP, r, x, step, rho_next * rho, 2.0 * rho_next / delta)
+            smoother.apply(smoother_kernels.STEP, r, x, step, rho_next * rho, 2.0 * rho_next / delta)
             rho = rho_next
 
 
-def _largest_patch_eigenvalue(level: Level, patches: VertexPatches, v, y) -> float:
-    """Power iteration estimate of the largest eigenvalue of M^-1 A on the free DOFs (M^-1 the
-    vertex-patch operator; ``v``, ``y``: work arrays of the level), POWER_STEPS steps."""
+def _largest_curl_eigenvalue(level: Level, smoother: CurlSmoother, v, y) -> float:
+    """Power iteration estimate of the largest eigenvalue of M^-1 A on the free DOFs (M^-1 the curl
+    smoother; ``v``, ``y``: work arrays of the level), POWER_STEPS steps."""
     kernels.random_fill(level.dim, v, level.mask, 7)
     estimate = 1.0
     norm = np.sqrt(kernels.dot(level.dim, v, v))
@@ -228,7 +230,7 @@ def _largest_patch_eigenvalue(level: Level, patches: VertexPatches, v, y) -> flo
         if norm == 0.0:
             return 1.0
         level.apply(v, y)
-        patches.apply(patch_kernels.APPLY, y, v, v, 0.0, 1.0 / norm)
+        smoother.apply(smoother_kernels.APPLY, y, v, v, 0.0, 1.0 / norm)
         norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
     return float(estimate)
 
