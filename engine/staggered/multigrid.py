@@ -70,8 +70,8 @@ BAND_SPREAD = 30.0
 FIXED_SHARE = 0.25
 # Above this lambda / mu the levels are smoothed on the curls too (nu = 0.4: lambda / mu = 4).
 ROBUST_RATIO = 4.0
-CURL_DEGREE = 6  # Chebyshev steps on M^-1 A (curl smoothing) before and after the coarse correction
-CURL_SPREAD = 20.0
+CURL_DEGREE = 8  # Chebyshev steps on M^-1 A (curl smoothing) before and after the coarse correction
+CURL_SPREAD = 30.0
 
 
 class Multigrid:
