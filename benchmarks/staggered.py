@@ -2,12 +2,15 @@
 
     .venv/bin/python -m benchmarks.staggered [--resolution 256] [--repeats 1] [--arch cpu] [--precision f64] [--json out.json]
     .venv/bin/python -m benchmarks.staggered --resolution 128 --nu 0.3 0.4999     # the shell at each nu (issue 21)
+    .venv/bin/python -m benchmarks.staggered --lame 0.05 --nu 0.3 0.49 0.499 0.4999   # free thick sphere (issue 21)
     .venv/bin/python -m benchmarks.staggered --iterations 32 64 128 --nu 0.3 0.45 0.49
     .venv/bin/python -m benchmarks.staggered --growth 32 64 [--fixed-share 0.5] [--no-band]
 
 Every job runs in its own spawned process (peak memory is that job's alone); medians over repeats.
 The shell: outer radius 1, inner 0.6, clamped below z = -0.8, gravity; rtol 1e-6; E = 1 MPa and
 Poisson's ratio --nu (0.3 by default; several give one shell run each and their time ratios).
+--lame H: the free Lame thick sphere of ``verification.problems`` at cell size H and each --nu
+(rtol 1e-10): CG iterations, relative L2 error of u at its probes against the closed form, seconds.
 """
 
 from __future__ import annotations
@@ -104,6 +107,16 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
     })
 
 
+def _lame(h: float, nu: float, queue) -> None:
+    from verification.problems import lame_at, relative_l2, simulate_problem
+
+    pb = lame_at(nu)
+    t = time.perf_counter()
+    r = simulate_problem(pb, {"kind": "staggered"}, h)
+    queue.put({"wall_s": time.perf_counter() - t, "iterations": r.solver.iterations, "stages": r.solver.stage_times,
+               "error_u": relative_l2(r.fields.probes["displacement"], pb.exact(pb.probes))})
+
+
 def _growth(mesh: str, resolution: int, fixed_share: float | None, band: bool, queue) -> None:
     """Error growth per stationary V-cycle, e <- (I - M A) e with a zero right-hand side, after 12
     cycles (the dominant mode's factor; above 1 the cycle alone diverges and CG must absorb it)."""
@@ -151,6 +164,7 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, nargs="*", help="resolutions of the multigrid iteration study (sphere)")
     ap.add_argument("--nu", type=float, nargs="*", default=[0.3])
     ap.add_argument("--growth", type=int, nargs="*", help="resolutions of the stationary V-cycle study (sphere)")
+    ap.add_argument("--lame", type=float, help="cell size of the free thick sphere study, one run per --nu")
     ap.add_argument("--fixed-share", type=float, help="override multigrid.FIXED_SHARE in the V-cycle study")
     ap.add_argument("--no-band", action="store_true", help="V-cycle study without the boundary smoothing")
     ap.add_argument("--json")
@@ -160,7 +174,14 @@ def main() -> None:
         shell, sphere = Path(tmp) / "shell.stl", Path(tmp) / "sphere.stl"
         shell_mesh(shell)
         sphere_mesh(sphere)
-        if args.growth:
+        if args.lame:
+            out["lame"] = []
+            for nu in args.nu:
+                r = run_isolated(_lame, args.lame, nu)
+                out["lame"].append({"nu": nu, "h": args.lame, **r})
+                print(f"thick sphere h={args.lame:g} nu={nu:g}: {r['iterations']} iterations, error {r['error_u']:.3e}, "
+                      f"{r['wall_s']:.1f} s (solve {r['stages'].get('solve', 0.0):.1f} s)", flush=True)
+        elif args.growth:
             out["growth"] = []
             for n in args.growth:
                 r = run_isolated(_growth, str(sphere), n, args.fixed_share, not args.no_band)

@@ -32,26 +32,20 @@ from engine.staggered.curls import CurlSmoother
 from engine.staggered.elasticity import StaggeredElasticity
 from engine.staggered.multigrid import _on_free
 from tests.conftest import polygon_surface_2d, surface_of
-from verification.problems import lame_problem, problem, relative_l2
+from verification.problems import lame_at, relative_l2, simulate_problem
 
 NUS = (0.3, 0.49, 0.499, 0.4999)
 
 
 def lame_run(nu: float, h: float) -> tuple[int, float]:
     """(CG iterations, relative L2 error of u at the probes) of the free thick sphere at nu."""
-    base = problem("lame")
-    pb = lame_problem(*base.radii, base.pressure, base.youngs_modulus, nu, base.probes)
-    spec, mesh, functions = pb.job({"kind": "staggered"}, h)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "shell.ply"  # binary PLY keeps float64 vertices
-        spec["geometry"]["mesh"] = path.name
-        mesh.export(path)
-        result = simulate(spec, path, cache=GeometryCache(None), functions=functions)
+    pb = lame_at(nu)
+    result = simulate_problem(pb, {"kind": "staggered"}, h)
     return result.solver.iterations, relative_l2(result.fields.probes["displacement"], pb.exact(pb.probes))
 
 
 def test_free_thick_sphere_iterations_and_error_do_not_grow_with_nu():
-    # measured at h = 1/16 (rtol 1e-10): 12 / 10 / 11 / 11 iterations, errors 5.94e-3, 9.59e-3,
+    # measured at h = 1/16 (rtol 1e-10): 12 / 9 / 9 / 9 iterations, errors 5.94e-3, 9.59e-3,
     # 9.85e-3, 9.88e-3 (1.66x); before the curl smoothing and face transfers ~4,200 iterations at
     # 0.4999 (h = 0.05)
     runs = [lame_run(nu, 1 / 16) for nu in NUS]
@@ -182,7 +176,7 @@ def block_run(nu: float, h: float):
 def test_block_compressed_between_clamped_faces_at_nu_04999():
     # measured (against h = 1/32): nu 0.3 errors 8.87e-2 / 1.81e-2 at h = 1/8 / 1/16, nu 0.4999
     # 2.16e-1 / 3.83e-2 (2.4x / 2.1x); volume change / (DELTA area) -0.662 at 0.3, -7.2e-4 at 0.4999;
-    # 16 and 30 CG iterations at h = 1/32
+    # 16 and 24 CG iterations at h = 1/32
     out = {}
     for nu in (0.3, 0.4999):
         runs = {h: block_run(nu, h) for h in (1 / 32, 1 / 16, 1 / 8)}

@@ -259,3 +259,30 @@ def problem(name: str) -> Problem:
     if name not in makers:
         raise KeyError(f"problem: one of {sorted(makers)}, got {name!r}")
     return makers[name]()
+
+
+def lame_at(nu: float) -> Problem:
+    """The "lame" problem (same facetted shell, probes, pressure and E) at Poisson's ratio ``nu``."""
+    base = problem("lame")
+    return lame_problem(*base.radii, base.pressure, base.youngs_modulus, nu, base.probes)
+
+
+def simulate_problem(pb: Problem, method: dict, cell_size: float, fields: list[str] | None = None):
+    """``engine.simulate`` of :meth:`Problem.job` (a mesh goes through a temporary binary PLY, which
+    keeps float64 vertices); ``fields``: the output fields when not the job's own. Returns the Result."""
+    import tempfile
+    from pathlib import Path
+
+    from engine import simulate
+    from engine.geometry.cache import GeometryCache
+
+    spec, mesh, functions = pb.job(method, cell_size)
+    if fields is not None:
+        spec["output"]["fields"] = list(fields)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = None
+        if mesh is not None:
+            path = Path(tmp) / "solid.ply"
+            spec["geometry"]["mesh"] = path.name
+            mesh.export(path)
+        return simulate(spec, path, cache=GeometryCache(None), functions=functions)

@@ -134,7 +134,7 @@ class Multigrid:
         self.coarse = CoarseSolver(self.levels[-1])
         if self.robust:
             self.curls = [CurlSmoother(lv) for lv in self.levels[:-1]]
-            self.bounds = [_largest_curl_eigenvalue(lv, sm, *self.work[k][:2]) * MARGIN
+            self.bounds = [_largest_eigenvalue(lv, self.work[k][0], _curl_step(lv, sm, self.work[k][1])) * MARGIN
                            for k, (lv, sm) in enumerate(zip(self.levels, self.curls))]
             self.bands = [None] * (len(self.levels) - 1)
         else:
@@ -182,20 +182,11 @@ class Multigrid:
         computing A x only at ``part``'s positions (all when None). ``first``: x is zero on entry."""
         lv = self.levels[k]
         step = self.work[k][0]
-        upper = self.bounds[k]
-        lower = upper / spread
-        theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
-        sigma = theta / delta
-        rho = 1.0 / sigma
-        if first:
-            kernels.chebyshev_start(lv.dim, x, step, dinv, b, 1.0 / theta)
-        else:
-            lv.chebyshev_step(x, b, step, dinv, 0.0, 1.0 / theta, part)
-        for _ in range(degree - 1):
-            rho_next = 1.0 / (2.0 * sigma - rho)
-            lv.chebyshev_step(x, b, step, dinv, rho_next * rho, 2.0 * rho_next / delta, part)
-            rho = rho_next
-
+        for i, (c1, c2) in enumerate(chebyshev_coefficients(self.bounds[k], spread, degree)):
+            if first and i == 0:
+                kernels.chebyshev_start(lv.dim, x, step, dinv, b, c2)
+            else:
+                lv.chebyshev_step(x, b, step, dinv, c1, c2, part)
 
     def _curl_chebyshev(self, k: int, b, x, first: bool) -> None:
         """CURL_DEGREE steps of Chebyshev iteration on M^-1 A (M^-1: Jacobi on the faces and the
@@ -203,36 +194,37 @@ class Multigrid:
         zero on entry. The smoothing is symmetric, so pre- and post-smoothing are the same."""
         lv, smoother = self.levels[k], self.curls[k]
         r, step = self.work[k][0], self.work[k][-1]
-        upper = self.bounds[k]
-        lower = upper / CURL_SPREAD
-        theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
-        sigma = theta / delta
-        rho = 1.0 / sigma
-        if first:
-            smoother.apply(smoother_kernels.START, b, x, step, 0.0, 1.0 / theta)
-        else:
-            lv.residual(x, b, r)
-            smoother.apply(smoother_kernels.STEP, r, x, step, 0.0, 1.0 / theta)
-        for _ in range(CURL_DEGREE - 1):
-            rho_next = 1.0 / (2.0 * sigma - rho)
-            lv.residual(x, b, r)
-            smoother.apply(smoother_kernels.STEP, r, x, step, rho_next * rho, 2.0 * rho_next / delta)
-            rho = rho_next
+        for i, (c1, c2) in enumerate(chebyshev_coefficients(self.bounds[k], CURL_SPREAD, CURL_DEGREE)):
+            if first and i == 0:
+                smoother.apply(smoother_kernels.START, b, x, step, c1, c2)
+            else:
+                lv.residual(x, b, r)
+                smoother.apply(smoother_kernels.STEP, r, x, step, c1, c2)
 
 
-def _largest_curl_eigenvalue(level: Level, smoother: CurlSmoother, v, y) -> float:
-    """Power iteration estimate of the largest eigenvalue of M^-1 A on the free DOFs (M^-1 the curl
-    smoother; ``v``, ``y``: work arrays of the level), POWER_STEPS steps."""
-    kernels.random_fill(level.dim, v, level.mask, 7)
-    estimate = 1.0
-    norm = np.sqrt(kernels.dot(level.dim, v, v))
-    for _ in range(POWER_STEPS):
-        if norm == 0.0:
-            return 1.0
+def chebyshev_coefficients(upper: float, spread: float, degree: int) -> list[tuple[float, float]]:
+    """(c1, c2) of each step ``step = c1 step + c2 M^-1 (b - A x), x += step`` of the Chebyshev
+    iteration for the eigenvalues of M^-1 A in [upper / spread, upper] (c1 = 0 in the first)."""
+    lower = upper / spread
+    theta, delta = 0.5 * (upper + lower), 0.5 * (upper - lower)
+    sigma = theta / delta
+    rho = 1.0 / sigma
+    out = [(0.0, 1.0 / theta)]
+    for _ in range(degree - 1):
+        rho_next = 1.0 / (2.0 * sigma - rho)
+        out.append((rho_next * rho, 2.0 * rho_next / delta))
+        rho = rho_next
+    return out
+
+
+def _curl_step(level: Level, smoother: CurlSmoother, y):
+    """v <- c M^-1 A v with M^-1 the curl smoother (``y``: a work array of the level)."""
+
+    def step(v, c: float) -> None:
         level.apply(v, y)
-        smoother.apply(smoother_kernels.APPLY, y, v, v, 0.0, 1.0 / norm)
-        norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
-    return float(estimate)
+        smoother.apply(smoother_kernels.APPLY, y, v, v, 0.0, c)
+
+    return step
 
 
 def boundary_band(level: Level):
@@ -262,18 +254,21 @@ def cut_share(level: Level) -> float:
     return np.count_nonzero((vc > 0) & (vc < 1)) / solid if solid else 1.0
 
 
-def _largest_eigenvalue(level: Level, v) -> float:
-    """Power iteration estimate of the largest eigenvalue of D^-1 A on the free DOFs (``v``: a
-    work array of the level). Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75
-    after 40): MARGIN times this estimate is the smoothers' upper bound as tuned."""
+def _largest_eigenvalue(level: Level, v, step=None) -> float:
+    """Power iteration estimate of the largest eigenvalue of M^-1 A on the free DOFs (``v``: a
+    work array of the level; ``step(v, c)``: v <- c M^-1 A v, by default with M = D in one pass).
+    Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75 after 40): MARGIN times this
+    estimate is the smoothers' upper bound as tuned."""
+    if step is None:
+        def step(v, c):
+            level.preconditioned(v, v, c)  # D^-1 vanishes off the free DOFs
     kernels.random_fill(level.dim, v, level.mask, 7)
     estimate = 1.0
     norm = np.sqrt(kernels.dot(level.dim, v, v))
     for _ in range(POWER_STEPS):
         if norm == 0.0:
             return 1.0
-        # v <- D^-1 A (v / |v|) in one pass (D^-1 vanishes off the free DOFs)
-        level.preconditioned(v, v, 1.0 / norm)
+        step(v, 1.0 / norm)
         norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
     return float(estimate)
 
