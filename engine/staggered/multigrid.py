@@ -76,7 +76,8 @@ CURL_SPREAD = 30.0
 
 class Multigrid:
     """V-cycle preconditioner on ``levels`` (finest first). Call :meth:`update` after the fine
-    level's free DOFs or shift change."""
+    level's free DOFs or shift change. ``robust``: curl smoothing and face transfers (default:
+    when lambda / mu > ROBUST_RATIO)."""
 
     def __init__(self, fine: Level, *, max_levels: int = 12, progress: Setup | None = None,
                  robust: bool | None = None) -> None:
