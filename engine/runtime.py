@@ -65,6 +65,7 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
     fp = ti.f64
     if arch == "auto":
         arch = "cuda" if cuda_driver_present() else "cpu"
+    _plain_source_positions()
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(
             arch=ti.cpu if arch == "cpu" else ti.cuda,
@@ -77,6 +78,31 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
     chosen = ti.lang.impl.current_cfg().arch
     _current = RuntimeInfo(arch="cuda" if chosen == ti.cuda else "cpu", precision=precision, cache_dir=str(cache))
     return _current
+
+
+def _plain_source_positions() -> None:
+    """Make Taichi's front end record a kernel statement's position as file, line and source line.
+
+    Taichi 1.7 formats every statement's position eagerly while it turns a kernel's Python AST into
+    its IR, which happens in every process even when the offline cache holds the compiled kernel:
+    line-wrapped source with a caret line under the statement's columns, made by ``textwrap``. That
+    formatting was a third of a cold job's extra time (the bundled cantilever: first job 4.5 s,
+    3.25 s without it, the next jobs 0.6-0.7 s; docs/benchmarks.md, "Cold start"). The plain form
+    keeps what a compile error needs to name the statement. The cache key does not depend on it
+    (the cached kernels load unchanged). A Taichi without this method keeps its own formatting.
+    """
+    from taichi.lang.ast import ast_transformer_utils
+
+    context = getattr(ast_transformer_utils, "ASTTransformerContext", None)
+    if context is None or not hasattr(context, "get_pos_info") or getattr(context, "_plain_positions", False):
+        return
+
+    def get_pos_info(self, node) -> str:
+        line = node.lineno + self.lineno_offset
+        return f'File "{self.file}", line {line}, in {self.func.func.__name__}:\n{self.src[node.lineno - 1]}\n'
+
+    context.get_pos_info = get_pos_info
+    context._plain_positions = True
 
 
 def cuda_driver_present() -> bool:

@@ -43,3 +43,36 @@ def test_init_once_with_precision_and_refuses_a_switch():
     assert lines[0].split()[0] in ("cpu", "cuda")
     assert lines[1] == "refused: True"
     assert "[Taichi]" not in out.stdout  # stdout stays clean for the CLI
+
+
+def test_a_kernel_compile_error_still_names_its_file_line_and_statement(tmp_path):
+    """init() replaces Taichi's eager caret formatting of source positions (a third of a cold job's
+    extra time) by file, line and source line: a compile error must still point at the statement."""
+    module = tmp_path / "broken_kernel.py"
+    module.write_text(textwrap.dedent(
+        """
+        import taichi as ti
+
+        @ti.kernel
+        def broken(x: ti.types.ndarray()):
+            for i in x:
+                x[i] = undefined_name * 2.0
+        """
+    ))
+    out = run_py(
+        f"""
+        import sys, numpy as np
+        sys.path.insert(0, {str(tmp_path)!r})
+        from engine import runtime
+        runtime.init("cpu", "f64")
+        import broken_kernel
+        try:
+            broken_kernel.broken(np.zeros(3))
+        except Exception as exc:
+            print(str(exc))
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    assert 'broken_kernel.py", line 7, in broken' in out.stdout, out.stdout
+    assert "x[i] = undefined_name * 2.0" in out.stdout, out.stdout
+    assert "undefined_name" in out.stdout.split("x[i] =")[-1], out.stdout
