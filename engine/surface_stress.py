@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .blas import on_one_thread
 from .boundary import Prescribed, SurfaceLoad, _measure_and_normal, select_patch
 from .geometry.surface import Surface
 from .grid import axis_pairs
@@ -63,6 +64,7 @@ def _in_patch(region, facets: np.ndarray, areas: np.ndarray, name: str) -> np.nd
     return covered >= 0.5 * areas
 
 
+@on_one_thread
 def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_scale: float = 1.0,
             feature_angle: float = FEATURE_ANGLE) -> np.ndarray:
     """Stress [m, d, d] [Pa] at the surface vertices from the method's raw stress ``raw`` [m, d, d]

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .blas import on_one_thread
 from .grid import Grid
 
 # VTK's corner order of a hexahedron / quadrilateral, as offsets of the cell's lower corner
@@ -183,6 +184,7 @@ def refine_surface(vertices: np.ndarray, faces: np.ndarray, max_edge: float) -> 
     return RefinedSurface(vertices=v, faces=f, parent=parent, weights=weights, max_edge=bound)
 
 
+@on_one_thread
 def _barycentric(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """Barycentric coordinates [M, d] of points [M, D] in simplices with corners [M, d, D]
     (triangles in 3D, segments in 2D), by least squares in the simplex's own plane."""

@@ -21,6 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..blas import on_one_thread
 from ..errors import VoxelasticError
 from ..geometry.moments import monomial_exponents
 
@@ -94,6 +95,7 @@ class BasisError(VoxelasticError):
     """An element's moments do not define a basis (degenerate or non-positive moments)."""
 
 
+@on_one_thread
 def orthonormalise(moments: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
     """(T [P, n, n], L [P, n, n]) with H = L L^T the Hankel matrices of moments [P, m].
 

@@ -19,12 +19,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ..blas import on_one_thread
+
 WIDTH = 1.0  # Gaussian width [h]
 
 
 class SurfaceEmbedding:
     """Maps DG coefficients u [E, 3, n] to the displacement [V, 3] of the surface vertices."""
 
+    @on_one_thread
     def __init__(self, method) -> None:
         el, basis, grid = method.elements, method.basis, method.elements.grid
         h = grid.spacing

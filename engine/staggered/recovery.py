@@ -16,6 +16,7 @@ import itertools
 
 import numpy as np
 
+from ..blas import on_one_thread
 from ..grid import Grid
 
 SUPPORT = 2.0  # kernel half-width, cells: 4 cell centres per axis around every point
@@ -59,6 +60,7 @@ def _bspline(t: np.ndarray) -> np.ndarray:
     return np.where(a < 1 / 3, 1 - 3 * a**2, np.where(a < 1, 1.5 * (1 - a) ** 2, 0.0))
 
 
+@on_one_thread
 def _linear_fit(rel: np.ndarray, weight: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Value at rel = 0 of the weighted least-squares linear fit, per point: rel [N, K, d],
     weight [N, K], values [N, K, c] -> [N, c]; the weighted mean where the fit is degenerate."""
