@@ -1,28 +1,25 @@
 """Stresses users can trust (issue 19), the DG side: the patch-recovered strain (engine/dg/recovery.py)
 at cells, probes and the surface, the surface stress carrying the applied tractions
-(engine/surface_stress.py, shared with the staggered method) and the reported peak.
+(engine/surface_stress.py, shared with the staggered method) and the reported peak. The patch test
+(a bar in uniaxial tension), the load steps' surface stress and the peak's place run for both
+methods in tests/test_surface_stress.py.
 
 Expected values come from exact solutions: the Lame thick sphere (verification.problems "lame":
 a = 0.5, b = 1 m, E = 1e7 Pa, nu = 0.3, p = 1e4 Pa inside, free body; von Mises 1.7143 p on the
-inner surface, 0.2143 p on the outer one), a bar in uniaxial tension (sigma_xx = the end traction,
-every other component zero) and a rigid rotation (no stress at all when the model warps).
+inner surface, 0.2143 p on the outer one) and a rigid rotation (no stress at all when the model warps).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
-from engine import simulate
 from engine.boundary import Prescribed
 from engine.dg import basis as B
 from engine.dg.elasticity import DGElasticity
-from engine.geometry.cache import GeometryCache
-from engine.material import Material
 from engine.peaks import peaks
-from tests.test_dg import MAT, box_region, rotated_box_cut, sphere_cut
-from tests.test_surface_stress import bar_job, run_sphere, sphere_probes
+from tests.test_dg import MAT, box_region, sphere_cut, turned_box
+from tests.test_surface_stress import run_sphere, sphere_probes
 
 DG2 = {"kind": "dg", "degree": 2}
 
@@ -61,66 +58,12 @@ def test_dg_k2_thick_sphere_probes_and_both_surfaces():
     assert np.linalg.norm(found["surface"].location) < 0.55
 
 
-def test_dg_surface_stress_of_a_bar_in_uniaxial_tension_is_uniform():
-    """Patch test: the k = 2 (and k = 1) solution of a bar pulled at both ends is the exact affine
-    field, its recovered strain uniform, and the surface stress sigma_xx = 1e3 Pa to round-off."""
-    for degree in (1, 2):
-        spec, mesh = bar_job({"kind": "dg", "degree": degree}, 0.125)
-        result = simulate(spec, mesh, filename="bar.stl", cache=GeometryCache(None))
-        s = result.fields.surface["stress"]
-        assert s.shape == (len(result.surface_vertices), 6)
-        want = np.array([1e3, 0, 0, 0, 0, 0])
-        np.testing.assert_allclose(s, np.broadcast_to(want, s.shape), atol=1e-6 * 1e3)
-        np.testing.assert_allclose(result.fields.surface["von_mises"], 1e3, rtol=1e-9)
-        cells = result.fields.cells["stress"]
-        solid = np.isfinite(cells[..., 0])
-        np.testing.assert_allclose(cells[solid], np.broadcast_to(want, cells[solid].shape), atol=1e-6 * 1e3)
-
-
-def test_dg_quasistatic_steps_carry_their_own_load_on_the_surface():
-    """Each load step's surface stress carries that step's traction: sigma_xx = k / n * 1e3 Pa."""
-    spec, mesh = bar_job(DG2, 0.125)
-    spec["analysis"] = {"kind": "quasistatic", "steps": 3}
-    result = simulate(spec, mesh, filename="bar.stl", cache=GeometryCache(None))
-    assert len(result.steps) == 3
-    for k, step in enumerate(result.steps, start=1):
-        s = step.surface["stress"]
-        np.testing.assert_allclose(s[:, 0], 1e3 * k / 3, rtol=1e-9)
-        np.testing.assert_allclose(s[:, 1:], 0.0, atol=1e-6)
-
-
-def test_dg_peak_of_a_cantilever_sits_at_the_root():
-    """A bar held at one end under a transverse tip traction: the largest surface and volume von
-    Mises lie near the root, the surface one of the order of beam theory's M c / I = 2.4e4 Pa."""
-    spec, mesh = bar_job(DG2, 0.125)
-    spec["boundaries"][1] = {"kind": "displacement", "name": "left", "value": [0, 0, 0],
-                             "region": {"halfspace": {"point": [0.01, 0, 0], "normal": [1, 0, 0]}}}
-    spec["boundaries"][0]["value"] = [0, 0, -1e3]
-    result = simulate(spec, mesh, filename="bar.stl", cache=GeometryCache(None))
-    found = peaks(result)
-    assert set(found) == {"surface", "volume"}
-    assert found["volume"].value == pytest.approx(np.nanmax(result.fields.cells["von_mises"]), rel=1e-12)
-    assert found["surface"].location[0] < 0.5 and found["volume"].location[0] < 0.5
-    assert 0.7 < found["surface"].value / 2.4e4 < 1.6, found["surface"].value
-
-
 @pytest.mark.parametrize("model", ["linear", "corotated"])
 def test_a_rigid_rotation_leaves_the_warped_surface_stress_free(model):
     """A box turned rigidly by 45 degrees: with stiffness warping every element's corotated strain
     is zero, and so are the recovered strain at the cells and the surface stress; the linear model
     sees C : sym(R - I), of the order of E."""
-    s, cut = rotated_box_cut(5)
-    c = np.asarray(s.vertices).mean(axis=0)
-    R = trimesh.transformations.rotation_matrix(np.pi / 4, [0, 0, 1])[:3, :3]
-
-    def rigid(x):
-        return (x - c) @ (R - np.eye(3)).T
-
-    lo, hi = s.bounds
-    ends = [Prescribed(box_region(lo - 1, [lo[0] + 0.15, hi[1] + 1, hi[2] + 1]), rigid, "left", (True,) * 3),
-            Prescribed(box_region([hi[0] - 0.15, lo[1] - 1, lo[2] - 1], hi + 1), rigid, "right", (True,) * 3)]
-    m = DGElasticity(cut=cut, surface=s, material=Material(1.0, 0.3, model=model), degree=1, flux="ip",
-                     penalty=10, prescribed=ends)
+    m, _ = turned_box(model)
     data = m.fields(m.solve(), ["stress", "von_mises"], None, True)
     peak = max(np.nanmax(np.abs(data.cells["stress"])), np.abs(data.surface["stress"]).max())
     if model == "linear":
