@@ -83,7 +83,7 @@ class Fields(SurfaceStress):
             return out
 
         strain = self.recovered_strain(u, state.rotations) if any(n in names for n in STRESS_FIELDS) else None
-        fit = self.patch_fit()
+        fit = self.patch_fit() if strain is not None else None
         if "displacement" in names:
             data.cells["displacement"] = dense(self.evaluate(u, element, centres))
         if velocity is not None and "velocity" in names:
