@@ -8,7 +8,9 @@ Each element K here gets the polynomial p_K of degree k (one degree more than th
 minimises sum_J w_KJ int_J |p_K - eps_J|^2 dV over the patch J in {K, face neighbours of K}: the
 patch spans about 3 h along every axis, enough to pin a degree-k polynomial, and a least-squares
 fit reproduces every strain field of degree <= k exactly, so the recovered strain is one order
-above the element's own (the thick sphere's probe von Mises: 2.6e-2 -> 1.1e-2 at h = 1/8).
+above the element's own (the thick sphere's probe von Mises at h = 1/8: 2.48e-2 -> 1.03e-2;
+docs/benchmarks.md). Larger patches (two rings of neighbours, the 27 cells around) were worse
+there: a quadratic does not follow the r^-3 stress over 5 h.
 
 Everything is exact polynomial algebra (no quadrature): the strain's monomial coefficients come
 from the basis coefficients (``basis.T``), the patch integrals are Hankel matrices of the elements'
