@@ -22,7 +22,7 @@ from .blas import on_one_thread
 from .boundary import Prescribed, SurfaceLoad, _measure_and_normal, select_patch
 from .geometry.surface import Surface
 from .grid import axis_pairs
-from .material import strain_fields
+from .material import stress, strain_fields
 
 STIFF = 1e8  # weight of the traction conditions against the raw stress (per unit area share)
 FEATURE_ANGLE = 30.0  # degrees: facets around a vertex whose normals differ more belong to different faces
@@ -211,3 +211,25 @@ def surface_fields(surface: Surface, raw: np.ndarray, names: list[str], lame: tu
     strain = sigma / (2 * mu)
     strain[..., :d] -= lam * trace / (2 * mu)
     return strain_fields(strain, names, lam, mu, d)
+
+
+class SurfaceStress:
+    """Mixin of a method (both use it): its surface's facet tractions, classified once, and the
+    surface stress fields from its raw strain at the surface vertices. Needs ``surface``,
+    ``surface_loads``, ``prescribed`` and ``material``."""
+
+    _tractions: FacetTractions | None = None
+
+    def facet_tractions(self) -> FacetTractions:
+        """Which surface facets are free, loaded or held (computed once)."""
+        if self._tractions is None:
+            self._tractions = facet_tractions(self.surface, self.surface_loads, self.prescribed)
+        return self._tractions
+
+    def surface_stress(self, strain: np.ndarray, names: list[str], load_scale: float = 1.0) -> dict[str, np.ndarray]:
+        """The requested stress fields at the surface vertices (:func:`surface_fields`) from the
+        method's raw Voigt strain there [m, 6 | 3], with the surface loads scaled by ``load_scale``."""
+        d = self.surface.dim
+        lam, mu = self.material.lame
+        raw = from_voigt(stress(strain, lam, mu, d), d)
+        return surface_fields(self.surface, raw, names, (lam, mu), self.facet_tractions(), load_scale)

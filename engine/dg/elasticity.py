@@ -225,9 +225,11 @@ class DGElasticity(BoundaryTerms, Fields):
         the predicted u^k + dt v^k [E, 3, n] of a backward-Euler step (after ``set_time_step``)."""
         t0 = time.perf_counter()
         if self.material.model == "corotated":
-            return self._solve_corotated(load_scale, value_scale, inertia, on_iteration, t0)
+            state = self._solve_corotated(load_scale, value_scale, inertia, on_iteration, t0)
+            state.load_scale = load_scale  # the surface stress carries this share of the loads
+            return state
         u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration)
-        return State(u, stats, time.perf_counter() - t0)
+        return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
 
     def _solve_corotated(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
                          on_iteration: Callable[[int, float], None] | None, t0: float) -> State:

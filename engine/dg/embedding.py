@@ -67,6 +67,7 @@ class SurfaceEmbedding:
 
         vertices = method.surface.vertices
         vert_elem = _vertex_elements(method, vertices)
+        self.vertex_element = vert_elem  # [V]: the element whose piece holds each vertex
         # candidate samples per owner element: its own corners and those of its face neighbours
         nbr = sp.coo_matrix((np.ones(2 * len(el.minus)), (np.concatenate([el.minus, el.plus]),
                                                           np.concatenate([el.plus, el.minus]))), shape=(E, E)).tocsr()

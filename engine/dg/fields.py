@@ -1,6 +1,11 @@
-"""The DG method's output: the displacement, strain and stress of the element polynomials at cell
-centres, at probes (located in their elements) and on the embedded surface, as a part of
-``DGElasticity``.
+"""The DG method's output at cell centres, at probes (located in their elements) and on the
+embedded surface, as a part of ``DGElasticity``.
+
+Displacements are the element polynomials' (on the surface: the smooth embedding,
+``embedding.py``). Strains everywhere are the patch fit of ``recovery.py`` (one degree above the
+element's own strain) evaluated in the element holding the point; at the surface vertices the
+stress then carries the applied tractions (:mod:`engine.surface_stress`, shared with the
+staggered method). With stiffness warping every element's strain is its corotated one.
 
 Mixed into ``elasticity.DGElasticity`` (it reads the method's elements, basis and material).
 """
@@ -9,14 +14,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..material import STRESS_FIELDS, pressure, von_mises
+from ..material import STRESS_FIELDS, strain_fields
 from ..method import State
 from ..output import FieldData
+from ..surface_stress import SurfaceStress
 from .embedding import SurfaceEmbedding
 from .location import locate, owners
+from .recovery import PatchFit, strain_polynomials
 
 
-class Fields:
+class Fields(SurfaceStress):
     """Output fields of ``DGElasticity`` (see the module docstring)."""
 
     def evaluate(self, u: np.ndarray, element: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -31,8 +38,9 @@ class Fields:
 
     def stress_at(self, u: np.ndarray, element: np.ndarray, points: np.ndarray,
                   rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(strain, stress) Voigt [N, 6] (xx, yy, zz, yz, xz, xy; tensor strain) at points of ``element``;
-        with rotations [E, 3, 3] the corotated strain sym(R^T F) - I."""
+        """(strain, stress) Voigt [N, 6] (xx, yy, zz, yz, xz, xy; tensor strain) of the element's own
+        polynomial at points of ``element`` (no recovery); with rotations [E, 3, 3] the corotated
+        strain sym(R^T F) - I."""
         G = self.gradient(u, element, points)
         if rotations is not None:
             F = np.eye(3) + G
@@ -64,7 +72,6 @@ class Fields:
                time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
         grid = self.elements.grid
         u = state.u
-        rot = state.rotations
         cells, element = self.cell_elements()
         centres = grid.sample_points(cells)
         data = FieldData(time=time_value)
@@ -75,41 +82,54 @@ class Fields:
             out[idx] = values
             return out
 
-        need_stress = any(n in names for n in STRESS_FIELDS)
+        strain = self.recovered_strain(u, state.rotations) if any(n in names for n in STRESS_FIELDS) else None
+        fit = self.patch_fit() if strain is not None else None
         if "displacement" in names:
             data.cells["displacement"] = dense(self.evaluate(u, element, centres))
         if velocity is not None and "velocity" in names:
             data.cells["velocity"] = dense(self.evaluate(velocity, element, centres))
-        if need_stress:
-            eps, sig = self.stress_at(u, element, centres, rot)
-            for name, val in (("strain", eps), ("stress", sig), ("von_mises", von_mises(sig, 3)),
-                              ("pressure", pressure(sig, 3))):
-                if name in names:
-                    data.cells[name] = dense(val)
+        if strain is not None:
+            for name, val in self._strain_fields(fit.evaluate(strain, element, centres), names).items():
+                data.cells[name] = dense(val)
         if probes is not None and len(probes):
             probes = np.asarray(probes, dtype=float)
             where = self.locate(probes)
             ok = where >= 0
             sel = where[ok]
 
-            def probe(values: np.ndarray, width: tuple) -> np.ndarray:
-                out = np.full((len(probes),) + width, np.nan)
+            def probe(values: np.ndarray) -> np.ndarray:
+                out = np.full((len(probes),) + values.shape[1:], np.nan)
                 out[ok] = values
                 return out
 
             if "displacement" in names:
-                data.probes["displacement"] = probe(self.evaluate(u, sel, probes[ok]), (3,))
+                data.probes["displacement"] = probe(self.evaluate(u, sel, probes[ok]))
             if velocity is not None and "velocity" in names:
-                data.probes["velocity"] = probe(self.evaluate(velocity, sel, probes[ok]), (3,))
-            if need_stress:
-                eps, sig = self.stress_at(u, sel, probes[ok], rot)
-                for name, val, width in (("strain", eps, (6,)), ("stress", sig, (6,)),
-                                         ("von_mises", von_mises(sig, 3), ()), ("pressure", pressure(sig, 3), ())):
-                    if name in names:
-                        data.probes[name] = probe(val, width)
+                data.probes["velocity"] = probe(self.evaluate(velocity, sel, probes[ok]))
+            if strain is not None:
+                for name, val in self._strain_fields(fit.evaluate(strain, sel, probes[ok]), names).items():
+                    data.probes[name] = probe(val)
         if surface:
-            data.surface["displacement"] = self.embedding().displacement(u)
+            embedding = self.embedding()
+            data.surface["displacement"] = embedding.displacement(u)
+            if strain is not None:
+                raw = fit.evaluate(strain, embedding.vertex_element, self.surface.vertices)
+                data.surface.update(self.surface_stress(raw, names, state.load_scale))
         return data
+
+    def recovered_strain(self, u: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
+        """The patch-fitted Voigt strain of coefficients u [E, 3, n] as monomial coefficients
+        [E, 6, n'] in the element frames (``recovery``; corotated with rotations [E, 3, 3])."""
+        return self.patch_fit().fit(strain_polynomials(u, self.basis, rotations))
+
+    def patch_fit(self) -> PatchFit:
+        """The strain recovery of this geometry (built once)."""
+        if getattr(self, "_patch_fit", None) is None:
+            self._patch_fit = PatchFit(self.elements, self.basis)
+        return self._patch_fit
+
+    def _strain_fields(self, strain: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
+        return strain_fields(strain, names, self.lam, self.mu, 3)
 
     def embedding(self) -> SurfaceEmbedding:
         if getattr(self, "_embedding", None) is None:

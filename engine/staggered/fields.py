@@ -15,16 +15,14 @@ from ..grid import axis_pairs
 from ..material import STRESS_FIELDS, strain_fields
 from ..output import FieldData
 from ..method import State
-from ..surface_stress import FacetTractions, facet_tractions, from_voigt, surface_fields
+from ..surface_stress import SurfaceStress
 from . import sampling
 from .recovery import fit_strain
 
 
-class StaggeredFields:
+class StaggeredFields(SurfaceStress):
     """Mixin of ``StaggeredElasticity``: needs ``level``, ``grid``, ``dim``, ``material``,
     ``surface``, ``surface_loads`` and ``prescribed``."""
-
-    _tractions: FacetTractions | None = None
 
     def fields(self, state: State, names: list[str], probes: np.ndarray | None, surface: bool,
                time_value: float | None = None, velocity: np.ndarray | None = None) -> FieldData:
@@ -47,16 +45,8 @@ class StaggeredFields:
             vertices = self.surface.vertices
             data.surface["displacement"] = self.point_displacement(state.u, vertices)
             if strain is not None:
-                raw = from_voigt(strain_fields(self.point_strain(strain, vertices), ["stress"], lam, mu, d)["stress"], d)
-                data.surface.update(surface_fields(self.surface, raw, names, (lam, mu), self.facet_tractions(),
-                                                   state.load_scale))
+                data.surface.update(self.surface_stress(self.point_strain(strain, vertices), names, state.load_scale))
         return data
-
-    def facet_tractions(self) -> FacetTractions:
-        """Which surface facets are free, loaded or held (computed once)."""
-        if self._tractions is None:
-            self._tractions = facet_tractions(self.surface, self.surface_loads, self.prescribed)
-        return self._tractions
 
     def point_strain(self, strain: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Voigt strain [P, 6 | 3] at points [P, d] [m] from the cell strains [*shape, 6 | 3]."""
