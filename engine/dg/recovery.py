@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..blas import on_one_thread
 from . import basis as B
 from .elements import Elements
 from .integrals import Basis
@@ -52,6 +53,7 @@ class PatchFit:
     """The patch least-squares fit of per-element polynomials of ``elements`` (see the module
     docstring); built once per geometry, :meth:`fit` per field."""
 
+    @on_one_thread
     def __init__(self, elements: Elements, basis: Basis, own_weight: float = OWN_WEIGHT) -> None:
         self.elements, self.basis = elements, basis
         k, E = basis.degree, elements.count
@@ -86,6 +88,7 @@ class PatchFit:
         np.add.at(out, self._k, moved)
         return out
 
+    @on_one_thread
     def fit(self, coefficients: np.ndarray) -> np.ndarray:
         """Fitted monomial coefficients [E, c, n] (element frames) of per-element polynomials
         given as monomial coefficients [E, c, n]: degree-k least squares over each patch."""
