@@ -248,10 +248,14 @@ def run(
 
     method = _discretize(spec, geo, functions or Functions(), setup)
     times["discretization"] = time.perf_counter() - t
+    # The method keeps what it needs of the geometry; the result takes the cell fractions now and
+    # the rest goes before the solve (the staggered method's face and edge fractions, say)
+    result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
+    warnings = geo.warnings
+    del geo
     t = time.perf_counter()
     outcome = run_analysis(method, spec.analysis, spec.output, progress)
     times["solve"] = time.perf_counter() - t
-    result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
     result.fields, result.steps = outcome.final, outcome.steps
     result.probe_points = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
     if not spec.output.surface:
@@ -260,7 +264,7 @@ def run(
         iterations=outcome.iterations,
         residual=outcome.residual,
         stage_times=times,
-        warnings=geo.warnings + method.warnings,
+        warnings=warnings + method.warnings,
     )
     progress("done", 1.0, {"iterations": outcome.iterations, "residual": outcome.residual})
     return result

@@ -96,7 +96,7 @@ def errors(kind: str, n: int, form: str = "quadrature") -> dict:
     """
     method, state = solve(kind, n, form)
     h = method.grid.spacing
-    a, p, x = method.dof_comp, method.dof_pos, method.dof_points
+    a, p, x = method.dof_comp, method.dof_pos, method.sample_points()
     r = np.hypot(x[:, 0], x[:, 1])
     free = method.level.free[a, p] & (r > INNER) & (r < OUTER)
     e = np.abs(state.u[a[free], p[free]] - exact(x[free])[np.arange(int(free.sum())), a[free]])

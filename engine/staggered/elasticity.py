@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -45,7 +45,7 @@ class StaggeredElasticity(StaggeredFields):
     backward Euler) and turned into fields (``fields``). Units SI; ``rtol``, ``max_iterations``
     from solver settings; ``warnings`` collects what the user should know about the setup."""
 
-    fractions: VolumeFractions
+    fractions: InitVar[VolumeFractions]  # read while the fine level is built, not kept
     surface: Surface
     material: Material
     prescribed: list[Prescribed] = field(default_factory=list)
@@ -56,10 +56,10 @@ class StaggeredElasticity(StaggeredFields):
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, fractions: VolumeFractions) -> None:
         say = self.progress or no_progress
         say("surface quadrature", 0.0)
-        grid = self.fractions.grid
+        grid = fractions.grid
         self.grid, self.dim = grid, grid.dim
         lam, mu = self.material.lame
         self.patches = hold_patches(self.prescribed, self.surface)
@@ -84,37 +84,32 @@ class StaggeredElasticity(StaggeredFields):
             points, normals = (np.concatenate(v) for v in zip(*acting))
             ghosts = sampling.stencil_samples(grid, points, normals)
         say("operator", 0.1)
-        self.level = level = make_fine_level(self.fractions, lam, mu, ghosts=ghosts)
+        self.level = level = make_fine_level(fractions, lam, mu, ghosts=ghosts)
         lay = level.layout
-        self.index = lay.indices()  # [positions, d] global index of every kept position
-        n = len(self.index)
-        # (a, position) of every active DOF, and its sample point
-        comp, pos = np.nonzero(level.active[:, :n])
-        self.dof_comp, self.dof_pos = comp, pos
-        # origin + h (I + 1/2 - e_a / 2), in place: [DOFs, d] temporaries cost seconds at 20 M DOFs
-        points = self.index[pos].astype(np.float64)
-        points += 0.5
-        points[np.arange(len(comp)), comp] -= 0.5
-        points *= grid.spacing
-        points += np.asarray(grid.origin, dtype=np.float64)
-        self.dof_points = points
+        # [positions, d] global index of every kept position; (a, position) of every active DOF, in
+        # the smallest integer types (with the DOFs' points, 57 bytes per unknown in int64)
+        self.index = lay.indices().astype(np.int32)
+        comp, pos = np.nonzero(level.active[:, :len(self.index)])
+        self.dof_comp, self.dof_pos = comp.astype(np.int8), pos.astype(np.int32)
+        del comp, pos
+        points = self.sample_points()
         # displacement boundaries act on their surface patches, weakly (Nitsche): every active DOF is free
         say("boundaries", 0.3)
         self.surface_terms = make_surface_operator(level, self.hold) if self.hold is not None else None
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += hold_warnings(self.prescribed, self.surface)
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
-        self.modes = self._floating_modes()
-        self.loads = self._load_vector()
-        self.hold_load = self._hold_load()
+        self.modes = self._floating_modes(points)
+        self.loads = self._load_vector(points)
         if self.modes:
-            check_balance(self.dof_points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
+            check_balance(points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
                           [(dofs, q) for dofs, q, _ in self.modes])
             free = sum(q.shape[1] for _, q, _ in self.modes)
             self.warnings.append(
                 f"{free} rigid-body mode(s) are not held by any displacement boundary; the loads balance, so the "
                 "solution is the one with no rigid motion (orthogonal to those modes)"
             )
+        del points  # setup only (24 bytes per unknown: 0.46 GiB at 256^3), gone before the multigrid's arrays
         if level.slivers:
             self.warnings.append(
                 f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
@@ -124,12 +119,22 @@ class StaggeredElasticity(StaggeredFields):
         self.space = _Space(level)
 
     # ------------------------------------------------------------------ setup
-    def _load_vector(self) -> np.ndarray:
+    def sample_points(self) -> np.ndarray:
+        """Sample point [DOFs, d] [m] of every active DOF (``dof_comp``, ``dof_pos``): origin + h (I +
+        1/2 - e_a / 2), made in place (temporaries of [DOFs, d] cost seconds at 20 M DOFs)."""
+        points = self.index[self.dof_pos].astype(np.float64)
+        points += 0.5
+        points[np.arange(len(self.dof_comp)), self.dof_comp] -= 0.5
+        points *= self.grid.spacing
+        points += np.asarray(self.grid.origin, dtype=np.float64)
+        return points
+
+    def _load_vector(self, points: np.ndarray) -> np.ndarray:
         """Consistent nodal forces [d, size] [N] of body force and surface loads (not scaled)."""
         level, grid, d = self.level, self.grid, self.dim
         f = np.zeros((d, level.size))
         if self.body_force is not None:
-            pts, a, p = self.dof_points, self.dof_comp, self.dof_pos
+            pts, a, p = points, self.dof_comp, self.dof_pos
             if callable(self.body_force):
                 b = np.asarray(self.body_force(pts), dtype=float).reshape(-1, d)[np.arange(len(pts)), a]
                 f[a, p] += grid.spacing**d * level.vf_host[a, p] * b
@@ -143,7 +148,7 @@ class StaggeredElasticity(StaggeredFields):
         free = self._free_body_lookup()
         for load in self.surface_loads:
             if load.form == "divergence":
-                f += self._divergence_load(load)
+                f += self._divergence_load(load, points)
                 continue
             pts, w, t, _ = self._load_points[id(load)]
             spread = sampling.surface_loads(grid, pts, w, t, active, free=free, name=load.name)
@@ -153,7 +158,7 @@ class StaggeredElasticity(StaggeredFields):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
 
-    def _divergence_load(self, load: SurfaceLoad) -> np.ndarray:
+    def _divergence_load(self, load: SurfaceLoad, points: np.ndarray) -> np.ndarray:
         """Work of sigma n on the surface written as a volume integral (thesis eq. 4.16):
         int_Omega sigma : grad u + div(sigma) . u, discretised with the operator's own weights and
         the staggered divergence. It equals the operator's residual of a constant stress exactly,
@@ -190,7 +195,7 @@ class StaggeredElasticity(StaggeredFields):
                 f[i] += ve * s_ab - _shift(ve * s_ab, j, back=True) - vf[i] * (s_ab - _shift(s_ab, j, back=True))
         f *= h ** (d - 1)
         out = np.zeros((d, level.size))
-        near = np.asarray(load.region.contains(self.dof_points, slack=0.5 * h), dtype=bool)
+        near = np.asarray(load.region.contains(points, slack=0.5 * h), dtype=bool)
         a, p = self.dof_comp[near], self.dof_pos[near]
         out[a, p] = f[(a,) + tuple(self.index[p].T)]
         return out
@@ -217,7 +222,7 @@ class StaggeredElasticity(StaggeredFields):
 
         return lookup
 
-    def _floating_modes(self) -> list:
+    def _floating_modes(self, points: np.ndarray) -> list:
         """Rigid modes of each body not held by prescribed DOFs: (DOF numbers, basis over them, flat
         positions a * size + p of those DOFs)."""
         body = self.dof_body
@@ -228,8 +233,8 @@ class StaggeredElasticity(StaggeredFields):
             m = self.surface_terms.mass.tocoo()
             held = sp.csr_matrix((m.data, (at[m.row], at[m.col])), shape=(len(body),) * 2)
         out = []
-        for dofs, q in free_modes(self.dof_points, self.dof_comp, fixed, body, held=held):
-            flat = self.dof_comp[dofs] * self.level.size + self.dof_pos[dofs]
+        for dofs, q in free_modes(points, self.dof_comp, fixed, body, held=held):
+            flat = self.dof_comp[dofs].astype(np.int64) * self.level.size + self.dof_pos[dofs]
             out.append((dofs, q, flat))
         return out
 
@@ -238,14 +243,6 @@ class StaggeredElasticity(StaggeredFields):
         keys = self.dof_comp.astype(np.int64) * self.level.size + self.dof_pos
         mine = self.surface_terms.comp.astype(np.int64) * self.level.size + self.surface_terms.pos
         return np.searchsorted(keys, mine)  # the DOFs are numbered in (component, position) order
-
-    def _hold_load(self) -> np.ndarray:
-        """Load [d, size] [N] of the prescribed values at scale 1 (the Nitsche terms' right-hand side)."""
-        f = np.zeros((self.dim, self.level.size))
-        if self.surface_terms is not None:
-            st = self.surface_terms
-            np.add.at(f, (st.comp, st.pos), st.rhs)
-        return f
 
     # ------------------------------------------------------------------ solve
     def set_time_step(self, dt: float | None) -> None:
@@ -259,16 +256,23 @@ class StaggeredElasticity(StaggeredFields):
         predicted displacement u^k + dt v^k [d, size] of a backward-Euler step (after set_time_step)."""
         t0 = time.perf_counter()
         level = self.level
+        # one host vector, updated in place and dropped before CG allocates its own (209 MB at 256^3)
         rhs = load_scale * self.loads
         if value_scale != 0.0 and self.surface_terms is not None:
-            rhs = rhs + value_scale * self.hold_load
+            st = self.surface_terms  # the prescribed values' load lives on the surface DOFs only
+            np.add.at(rhs, (st.comp, st.pos), value_scale * st.rhs)
         if inertia is not None:
-            rhs = rhs + level.shift * level.mass.to_numpy() * inertia
-        rhs = rhs * level.free
+            rhs += level.shift * level.mass.to_numpy() * inertia
+        rhs *= level.free
         if self.modes:
             rhs = self._project(rhs)
         b = device_array(rhs)
-        x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
+        del rhs
+
+        def start():
+            return device_array(x0 * level.free if x0 is not None else np.zeros(level.free.shape))
+
+        x = start()
         try:
             _, stats = self._cg(self.multigrid.precondition).solve(b, x, on_iteration)
         except SolverError as exc:
@@ -278,11 +282,11 @@ class StaggeredElasticity(StaggeredFields):
                 raise
             # the V-cycle failed (lost definiteness, stagnated): plain Jacobi-PCG is slower but robust
             self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")
-            x = device_array((x0 if x0 is not None else np.zeros_like(rhs)) * level.free)
+            x = start()
             _, stats = self._cg(self._jacobi).solve(b, x, on_iteration)
         # a true residual the restarts left above rtol (within the solver's slack) goes in the report
         self.warnings.extend(w for w in stats.warnings if w not in self.warnings)
-        u = x.to_numpy().astype(np.float64)
+        u = x.to_numpy().astype(np.float64, copy=False)
         if self.modes:
             u = self._without_rigid_motion(self._project(u))
         u = u * level.free
