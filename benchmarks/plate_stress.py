@@ -61,6 +61,10 @@ def plot(rows: list[dict], path: Path) -> None:
             got = sorted((r["h"], abs(r["error"])) for r in rows if r["case"] == case and r["method"] == method)
             if got:
                 ax.loglog(*zip(*got), marker=marker, label=f"{method}" + (" k = 2" if method == "dg" else ""))
+        ticks = sorted({r["h"] for r in rows if r["case"] == case})
+        ax.set_xticks(ticks, [f"{h:g}" for h in ticks], minor=False)
+        ax.set_xticks([], minor=True)
+        ax.tick_params(axis="x", labelrotation=45)
         ax.set_title(f"{case}: sigma_xx at {PLATES[case].point}")
         ax.set_xlabel("h [m]")
         ax.grid(True, which="both", alpha=0.3)
