@@ -26,7 +26,8 @@ import numpy as np
 
 from verification.plates import LOAD, PLATES, run_plate
 
-DEFAULT_H = {"staggered": (0.05, 0.04, 0.025, 0.02, 0.0125), "dg": (0.1, 0.05, 0.04)}
+DEFAULT_H = {"staggered": (0.05, 0.04, 0.025, 0.02, 0.0125, 0.01, 0.008, 0.00625),
+             "dg": (0.1, 0.05, 0.04, 1 / 30, 0.025)}  # DG h = 0.025: ~12 GB (the direct factorisation)
 METHODS = {"staggered": {"kind": "staggered"}, "dg": {"kind": "dg", "degree": 2}}
 
 
