@@ -63,7 +63,7 @@ def plot(rows: list[dict], path: Path) -> None:
             if got:
                 ax.loglog(*zip(*got), marker=marker, label=f"{method}" + (" k = 2" if method == "dg" else ""))
         ticks = sorted({r["h"] for r in rows if r["case"] == case})
-        ax.set_xticks(ticks, [f"{h:g}" for h in ticks], minor=False)
+        ax.set_xticks(ticks, [f"{h:.3g}" for h in ticks], minor=False)
         ax.set_xticks([], minor=True)
         ax.tick_params(axis="x", labelrotation=45)
         ax.set_title(f"{case}: sigma_xx at {PLATES[case].point}")

@@ -4,7 +4,9 @@ verification/plate_reference.json (``python -m benchmarks.plate_peer --write``: 
 graded quarter meshes, tension 4.0245, bending -10.2155 times the load; see docs/benchmarks.md).
 
 Coarse grids only (the refinement studies are ``python -m benchmarks.plate_stress``); the bounds
-are the measured errors (in the docstrings) with a margin.
+are the measured errors (beside each entry) with a margin. On finer grids DG k = 2 stops near 1%
+(-1.1% tension, -1.4% bending at h = 0.025) and the staggered method scatters by ~3% about the
+reference below h = 0.0125; those levels cost minutes and ~12 GB (DG) and stay in the benchmark.
 """
 
 from __future__ import annotations
