@@ -2,11 +2,12 @@
 
 The plate and both loadings are symmetric about x = 0.5 and y = 0.5, so the reference solves the
 quarter x >= 0.5, y >= 0.5 of the true geometry (OpenCASCADE box minus cylinder, meshed by gmsh
-with straight-sided tetrahedra) with the mirror conditions u_x = 0 on x = 0.5 and u_y = 0 on
+with second-order tetrahedra: edge nodes on the cylinder) with the mirror conditions u_x = 0 on x = 0.5 and u_y = 0 on
 y = 0.5. ``tension``: traction LOAD e_x on x = 1 and u_z = 0 at one vertex (the quarter's one rigid
 motion left; the loads have no z part, so it carries no force). ``bending``: x = 1 clamped, pressure
-LOAD on z = 0.2. P2 Lagrange (scikit-fem ``ElementVector(ElementTetP2)``), stiffness exact on the
-affine elements, solved directly (pypardiso, MKL PARDISO; SciPy's SuperLU where it is missing).
+LOAD on z = 0.2. Isoparametric P2 Lagrange (scikit-fem ``ElementVector(ElementTetP2)`` on
+``MeshTet2``; straight-sided P2 did not converge in tension, the hole's chords away from the point
+setting the load path), stiffness quadrature of order 2, solved directly (pypardiso, MKL PARDISO; SciPy's SuperLU where it is missing).
 
 Mesh: size ``min(h_max, h_min + GRADE * r)``, r [m] the distance from the line x = 0.5, y = 0.65
 (the hole's edge on the symmetry plane, through both points), with h_max = H_MAX_OVER_MIN * h_min;

@@ -20,8 +20,8 @@ Both points lie on the surface and on the plate's x and y symmetry planes (the m
 symmetric about them when 0.5 / h is an integer or a half-integer). Each method reads the
 quantity from ``output.probes``: :data:`INSET` [m] inside along the hole's normal (-e_y), so that a
 probe is in material for either method whatever the cell lookup does on the surface itself; the
-P2 reference is evaluated at the same inset points, whose stress differs from the surface point's
-by O(INSET / R) = 7e-8 relative.
+P2 reference is evaluated at the surface point (the mean over the elements holding it), whose
+stress differs from the probe's by O(INSET / R) = 7e-8 relative.
 
 The reference values, their mesh sizes and the command that made them are in ``REFERENCE_FILE``
 (written by ``python -m benchmarks.plate_peer --write``); tests and the benchmark read it here, so
