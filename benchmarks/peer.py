@@ -133,15 +133,24 @@ def _gmsh_mesh(name: str, radii: tuple[float, ...], h: float, curved: bool) -> _
         gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
         gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
         gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.model.mesh.generate(dim)
-        if curved:
-            gmsh.model.mesh.setOrder(2)  # boundary edge nodes on the CAD surface, interior ones midway
-        cell_type = {(3, False): 4, (3, True): 11, (2, False): 2, (2, True): 9}[dim, curved]
-        local = gmsh.model.mesh.getElementProperties(cell_type)[4].reshape(-1, dim)  # reference nodes
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        _, nodes = gmsh.model.mesh.getElementsByType(cell_type)
+        return read_gmsh_mesh(dim, curved)
     finally:
         gmsh.finalize()
+
+
+def read_gmsh_mesh(dim: int, curved: bool) -> _GmshMesh:
+    """Generate the current gmsh model's mesh (sizes already set) and read it back: simplices of
+    dimension ``dim``, second order with edge nodes on the CAD boundary when ``curved``. Call between
+    ``gmsh.initialize`` and ``gmsh.finalize``."""
+    import gmsh
+
+    gmsh.model.mesh.generate(dim)
+    if curved:
+        gmsh.model.mesh.setOrder(2)  # boundary edge nodes on the CAD surface, interior ones midway
+    cell_type = {(3, False): 4, (3, True): 11, (2, False): 2, (2, True): 9}[dim, curved]
+    local = gmsh.model.mesh.getElementProperties(cell_type)[4].reshape(-1, dim)  # reference nodes
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    _, nodes = gmsh.model.mesh.getElementsByType(cell_type)
     coords = coords.reshape(-1, 3)[:, :dim]
     lookup = np.full(int(tags.max()) + 1, -1, dtype=np.int64)  # tags: 1-based, with gaps
     lookup[tags.astype(np.int64)] = np.arange(len(tags))
@@ -164,7 +173,7 @@ def _gmsh_mesh(name: str, radii: tuple[float, ...], h: float, curved: bool) -> _
     return out
 
 
-def _skfem_mesh(gm: _GmshMesh, dim: int) -> tuple[object, object]:
+def skfem_mesh(gm: _GmshMesh, dim: int) -> tuple[object, object]:
     """scikit-fem meshes (mesh, its straight simplices): MeshTet1 / MeshTri1 twice, or
     MeshTet2 / MeshTri2 with gmsh's edge nodes and the MeshTet1 / MeshTri1 of its vertices."""
     import skfem
@@ -207,7 +216,7 @@ def _discretise(prob: Problem, order: int, h: float, curved: bool) -> _Discretis
     import skfem
     from skfem.mapping import MappingAffine
 
-    mesh, linear = _skfem_mesh(_gmsh_mesh(prob.name, prob.radii, h, curved), prob.dim)
+    mesh, linear = skfem_mesh(_gmsh_mesh(prob.name, prob.radii, h, curved), prob.dim)
     if prob.dim == 3:
         scalar = skfem.ElementTetP1() if order == 1 else skfem.ElementTetP2()
     else:
@@ -357,7 +366,7 @@ def _remove_rigid_l2(basis, order: int, modes: np.ndarray, u: np.ndarray) -> np.
 
 
 # ----------------------------------------------------------------------------- probes
-def _reference_coordinates(mapping, x: np.ndarray, cells: np.ndarray, start: np.ndarray) -> np.ndarray:
+def reference_coordinates(mapping, x: np.ndarray, cells: np.ndarray, start: np.ndarray) -> np.ndarray:
     """Reference coordinates [d, M] of points x [d, M] in elements ``cells`` [M] of a curved mesh.
 
     Newton from ``start`` [d, M] (the straight element's answer) without scikit-fem's clipping to
@@ -399,7 +408,7 @@ def _locate(disc: _Discretisation, x: np.ndarray, outside: str, candidates: int 
             # Newton only where the straight element is near: curving moves a boundary element's
             # barycentric coordinates by O(h / R), well below 0.5 at the sizes meshed here
             near = lam > -0.5
-            X[:, near] = _reference_coordinates(disc.basis.mapping, xs[:, near], ix.ravel()[near], X[:, near])
+            X[:, near] = reference_coordinates(disc.basis.mapping, xs[:, near], ix.ravel()[near], X[:, near])
             lam = np.concatenate([1 - X.sum(axis=0)[None], X], axis=0).min(axis=0)
             lam[~near] = -np.inf
         lam = np.nan_to_num(lam, nan=-np.inf).reshape(len(todo), k)

@@ -96,11 +96,11 @@ def hollow_box(outer: tuple[float, float, float], wall: float) -> trimesh.Trimes
     return trimesh.util.concatenate([out, cavity])
 
 
-def holed_plate(size: tuple[float, float, float], radius: float) -> trimesh.Trimesh:
+def holed_plate(size: tuple[float, float, float], radius: float, sections: int = 48) -> trimesh.Trimesh:
     """Plate of ``size`` [m] (corner at 0) with a cylindrical through hole of ``radius`` [m] along z
-    at its centre (manifold3d boolean; 48 facets around)."""
+    at its centre (manifold3d boolean; ``sections`` facets around, a vertex at angle 0 from +x)."""
     plate = trimesh.creation.box(bounds=[[0, 0, 0], list(size)])
-    drill = trimesh.creation.cylinder(radius=radius, height=3 * size[2], sections=48)
+    drill = trimesh.creation.cylinder(radius=radius, height=3 * size[2], sections=sections)
     drill.apply_translation([size[0] / 2, size[1] / 2, size[2] / 2])
     holed = plate.difference(drill, engine="manifold")
     if not holed.is_watertight or holed.euler_number != 0:
