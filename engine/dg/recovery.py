@@ -5,12 +5,13 @@ The strain of a degree-k DG solution is a degree k - 1 polynomial per element, d
 across interfaces: taken as it is at a probe it is one order below the displacement, and at the
 surface (where the element's polynomial is only weakly tied to the traction) it is noisier still.
 Each element K here gets the polynomial p_K of degree k (one degree more than the data) that
-minimises sum_J w_KJ int_J |p_K - eps_J|^2 dV (w_KK = OWN_WEIGHT, 1 for the neighbours) over the patch J in {K, face neighbours of K}: the
-patch spans about 3 h along every axis, enough to pin a degree-k polynomial, and a least-squares
-fit reproduces every strain field of degree <= k exactly, so the recovered strain is one order
-above the element's own (the thick sphere's probe von Mises at h = 1/8: 2.48e-2 -> 8.93e-3 with
-the element's own strain weighted OWN_WEIGHT; docs/benchmarks.md). Larger patches (two rings of neighbours, the 27 cells around) were worse
-there: a quadratic does not follow the r^-3 stress over 5 h.
+minimises sum_J w_KJ int_J |p_K - eps_J|^2 dV (w_KK = OWN_WEIGHT, 1 for the neighbours) over the
+patch J in {K, face neighbours of K}: the patch spans about 3 h along every axis, enough to pin a
+degree-k polynomial, and a least-squares fit reproduces every strain field of degree <= k exactly,
+so the recovered strain is one order above the element's own (the thick sphere's probe von Mises at
+h = 1/8: 2.48e-2 -> 8.93e-3 with the element's own strain weighted OWN_WEIGHT; docs/benchmarks.md).
+Larger patches (two rings of neighbours, the 27 cells around) were worse there: a quadratic does
+not follow the r^-3 stress over 5 h.
 
 Everything is exact polynomial algebra (no quadrature): the strain's monomial coefficients come
 from the basis coefficients (``basis.T``), the patch integrals are Hankel matrices of the elements'
