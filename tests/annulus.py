@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from engine.geometry.cache import GeometryCache
-from engine.pipeline import Functions, run
+from engine.pipeline import Functions
 from verification.problems import ANNULUS_RADII, circle
 from verification.problems import annulus_body_force as body_force
 from verification.problems import annulus_exact as exact
