@@ -138,14 +138,11 @@ def test_bar_rotated_off_the_axes_bends_like_the_aligned_bar(method):
 def test_plate_with_a_through_hole(method):
     row = S.hole_case(method, SIZE)
     assert_passed([row])
-    # the hole softens the plate: measured end / (T L / E) 1.214 staggered, 1.196 DG; sxx / T 2.8-3.1
-    # staggered. DG's recovered strain (issue 19) is a degree-2 fit over 3 cells, which the quick size
-    # (h = 0.083 m: the hole 2.4 cells across, the plate 1.5 cells thick) smears: measured 1.80 here,
-    # 2.35 / 2.90 / 2.92 at 4 / 6 / 8 cells across W (the raw element polynomial at the cell centres
-    # gave 3.02, 2.96, 3.14, 2.99; the exact peak is ~3.6). Its floor is the net section's mean stress,
-    # T / (1 - d / W) = 1.67 T, which some cell of the net section must exceed.
+    # the hole softens the plate: measured end / (T L / E) 1.214 staggered, 1.199 DG; sxx / T 2.8-3.1
+    # staggered, 2.50 DG (its recovered strain, the own element weighted 16 in the patch fit: with
+    # equal weights the quick size's hole, 2.4 cells across, was smeared to 1.80; the exact peak ~3.6)
     assert 1.1 < row.values["ratio"] < 1.3
-    assert (2.0 if method == "staggered" else 1.0 / (1 - 0.4)) < row.values["max_sxx_over_T"] < 4.0
+    assert 2.0 < row.values["max_sxx_over_T"] < 4.0
 
 
 # ----------------------------------------------------------------------------- large strain, time steps
