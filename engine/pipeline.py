@@ -249,7 +249,7 @@ def run(
     method = _discretize(spec, geo, functions or Functions(), setup)
     times["discretization"] = time.perf_counter() - t
     # The method keeps what it needs of the geometry; the result takes the cell fractions now and
-    # the rest goes before the solve (the staggered method's face and edge fractions, say)
+    # the rest goes before the solve (for the staggered method: its face and edge fractions)
     result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
     warnings = geo.warnings
     del geo
