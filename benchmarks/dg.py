@@ -1,11 +1,13 @@
 """DG method floor: a sphere shell on a 16^3 grid, k = 2, static; stages and assembly throughput.
 
     .venv/bin/python -m benchmarks.dg [--resolution 16] [--degree 2] [--repeats 3] [--json out.json]
+                                      [--solver auto|direct|iterative]
     .venv/bin/python -m benchmarks.dg --solvers [--resolution 16] [--degree 2]
 
 ``--solvers`` builds the same system once and times its linear solvers side by side, each in its
-own spawned process: MKL PARDISO Cholesky (the one used), scipy SuperLU (the fallback), Taichi's
-SparseSolver LLT and pyamg smoothed-aggregation CG (rtol 1e-10, rigid modes as near-null space).
+own spawned process: MKL PARDISO Cholesky (the direct one), scipy SuperLU (the fallback), Taichi's
+SparseSolver LLT, pyamg smoothed-aggregation CG (rtol 1e-10, rigid modes as near-null space) and the
+engine's p-multigrid CG (rtol 1e-10; the iterative one), or those named by ``--which``.
 
 Shell: icospheres (subdivisions 5) of radius 1 and 0.6, clamped below z = -0.8, gravity,
 E = 1e6, nu = 0.3, IP, penalty 10. Each repeat runs in its own spawned process (cold geometry
@@ -23,7 +25,7 @@ import time
 from pathlib import Path
 
 
-def _shell_method(resolution: int, degree: int):
+def _shell_method(resolution: int, degree: int, solver: str = "auto"):
     """(DGElasticity, slicing seconds, discretization seconds) of the benchmark shell."""
     import numpy as np
     import trimesh
@@ -50,12 +52,12 @@ def _shell_method(resolution: int, degree: int):
     clamp = Halfspaces(np.array([[0, 0, 1.0]]), np.array([-0.8]))
     m = DGElasticity(cut=cut, surface=surface, material=Material(1e6, 0.3, 1000), degree=degree, flux="ip",
                      penalty=10, prescribed=[Prescribed(clamp, (0, 0, 0), "base")],
-                     body_force=np.array([0, 0, -9.81e3]))
+                     body_force=np.array([0, 0, -9.81e3]), solver_kind=solver)
     return m, t1 - t0, time.perf_counter() - t1
 
 
-def _run(resolution: int, degree: int, queue) -> None:
-    m, slicing, discretization = _shell_method(resolution, degree)
+def _run(resolution: int, degree: int, solver: str, queue) -> None:
+    m, slicing, discretization = _shell_method(resolution, degree, solver)
     t = time.perf_counter()
     st = m.solve()
     solve = time.perf_counter() - t
@@ -64,6 +66,7 @@ def _run(resolution: int, degree: int, queue) -> None:
         "slicing_s": slicing, "discretization_s": discretization, "solve_s": solve,
         "total_s": slicing + discretization + solve,
         "stages": m.timings, "nnz": int(m.matrix.nnz), "residual": st.stats.residual, "eta": m.eta,
+        "iterations": st.stats.iterations,
         "assembly_elements_per_s": m.elements.count / (m.timings["element_blocks"] + m.timings["assembly"]),
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
         "backend": m.solver.backend,
@@ -75,7 +78,7 @@ def _solver(name: str, resolution: int, degree: int, queue) -> None:
     import numpy as np
     import scipy.sparse as sp
 
-    m, _, _ = _shell_method(resolution, degree)
+    m, _, _ = _shell_method(resolution, degree, "direct")
     A = sp.csr_matrix(m.matrix)
     b = m._rhs(1.0, 1.0, None)
     reference = m.solver.apply_inverse(b)
@@ -128,11 +131,20 @@ def _solver(name: str, resolution: int, degree: int, queue) -> None:
         x, info = spla.cg(A, b, rtol=1e-10, M=M, maxiter=2000, callback=lambda xk: its.append(1))
         if info != 0:
             x = np.full_like(b, np.nan)
+    elif name == "pmg-cg":
+        from engine.dg.basis import size
+        from engine.solvers.pmultigrid import PMultigrid
+
+        coarse = (np.arange(3)[:, None] * m.n + np.arange(size(degree - 1))[None, :]).reshape(-1)
+        pmg = PMultigrid(A, 3 * m.n, coarse, rtol=1e-10)
+        t1 = time.perf_counter()
+        x, stats = pmg.solve(b)
+        its = [1] * stats.iterations
     else:
         raise SystemExit(f"unknown solver {name}")
     t2 = time.perf_counter()
     queue.put({"solver": name, "dofs": A.shape[0], "nnz": int(A.nnz), "setup_s": t1 - t0, "solve_s": t2 - t1,
-               "total_s": t2 - t0, "iterations": len(its) if name == "pyamg-cg" else 1,
+               "total_s": t2 - t0, "iterations": len(its) if name in ("pyamg-cg", "pmg-cg") else 1,
                "residual": float(np.linalg.norm(A @ x - b) / np.linalg.norm(b)),
                "difference": float(np.linalg.norm(x - reference) / np.linalg.norm(reference)),
                "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
@@ -145,11 +157,15 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path)
     ap.add_argument("--solvers", action="store_true", help="time the linear solvers side by side")
+    ap.add_argument("--which", nargs="+", default=["pardiso", "superlu", "taichi-llt", "pyamg-cg", "pmg-cg"],
+                    help="the solvers --solvers times")
+    ap.add_argument("--solver", choices=("auto", "direct", "iterative"), default="auto",
+                    help="the DG solver of the whole-job runs (auto: p-multigrid CG above 100,000 unknowns)")
     a = ap.parse_args()
     ctx = mp.get_context("spawn")
     if a.solvers:
         rows = []
-        for name in ("pardiso", "superlu", "taichi-llt", "pyamg-cg"):
+        for name in a.which:
             q = ctx.Queue()
             p = ctx.Process(target=_solver, args=(name, a.resolution, a.degree, q))
             p.start()
@@ -162,7 +178,7 @@ def main() -> None:
     runs = []
     for _ in range(a.repeats):
         q = ctx.Queue()
-        p = ctx.Process(target=_run, args=(a.resolution, a.degree, q))
+        p = ctx.Process(target=_run, args=(a.resolution, a.degree, a.solver, q))
         p.start()
         runs.append(q.get())
         p.join()

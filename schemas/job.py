@@ -162,6 +162,10 @@ class DGMethod(SpecModel):
         None, gt=0, json_schema_extra=not_null,
         description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+); doubled until the matrix is "
                     "positive definite. Default by degree: 2.5 (k=1), 10 (k=2); a larger eta makes k=1 stiffer.")
+    solver: Literal["auto", "direct", "iterative"] = Field(
+        "auto", description="Linear solver: 'direct' sparse Cholesky (its memory grows superlinearly), 'iterative' CG "
+                            "preconditioned by p-multigrid onto degree k-1 (to solver.rtol), 'auto' iterative above "
+                            "100,000 unknowns for k=1 and 50,000 for k=2.")
 
 
 Method = Annotated[

@@ -16,41 +16,43 @@ from . import kernels
 from .elements import Elements
 from .integrals import Basis, PatchProjection, element_gradients, face_products, patch_products
 
+CHUNK = 8192  # blocks added at a time: bounds the temporary copies
+FACE_CHUNK = 8192  # faces integrated at a time: their moments and products are the big temporaries
+
 
 @dataclass
 class Group:
-    """Blocks data [K, s, s] at (rows [K], cols [K]); ``owner`` [K]: the element whose rotation warps
+    """Blocks at (rows [K], cols [K]): block k is data[pick[k]] (data [U, s, s]; pick [K], None: data[k]),
+    so blocks that full cells share are stored once. ``owner`` [K]: the element whose rotation warps
     each block (its stress side, Kaufmann et al. section 6.1), None for blocks that are never warped."""
 
     rows: np.ndarray
     cols: np.ndarray
     data: np.ndarray
     owner: np.ndarray | None = None
+    pick: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def blocks(self, part: slice) -> np.ndarray:
+        """The blocks [k, s, s] of ``part`` (a copy where they are shared)."""
+        return self.data[part] if self.pick is None else self.data[self.pick[part]]
 
 
-@dataclass
-class Blocks:
-    """A block-sparse symmetric matrix in pieces: rows [K], cols [K], data [K, s, s] (duplicates summed
-    on assembly; only one triangle of the off-diagonal pairs is listed, mirrored on assembly)."""
-
-    rows: np.ndarray
-    cols: np.ndarray
-    data: np.ndarray
-
-
-def element_blocks(el: Elements, basis: Basis, mu: float, lam: float) -> np.ndarray:
-    """int_K eps(v) : C : eps(u) for every element -> [E, 3 n, 3 n] [N/m]."""
+def element_blocks(el: Elements, basis: Basis, mu: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """int_K eps(v) : C : eps(u) for every element: (blocks [U, 3 n, 3 n] [N/m], pick [E]): element e's
+    block is blocks[pick[e]]; full cells share the reference block 0."""
     D_ref, D_cut = element_gradients(el, basis)
     s = 3 * basis.size
-    out = np.empty((el.count, s, s))
-    ref = np.empty((1, s, s))
-    kernels.element_blocks(np.ascontiguousarray(D_ref), mu, lam, ref)
-    out[el.full] = ref[0]
+    cut = ~el.full
+    out = np.empty((1 + int(cut.sum()), s, s))
+    kernels.element_blocks(np.ascontiguousarray(D_ref), mu, lam, out[:1])
     if len(D_cut):
-        cut = np.empty((len(D_cut), s, s))
-        kernels.element_blocks(np.ascontiguousarray(D_cut), mu, lam, cut)
-        out[~el.full] = cut
-    return out
+        kernels.element_blocks(np.ascontiguousarray(D_cut), mu, lam, out[1:])
+    pick = np.zeros(el.count, dtype=np.int64)
+    pick[cut] = 1 + np.arange(int(cut.sum()))
+    return out, pick
 
 
 def face_penalty(el: Elements, eta: float) -> np.ndarray:
@@ -59,32 +61,33 @@ def face_penalty(el: Elements, eta: float) -> np.ndarray:
 
 
 def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, weights: tuple[float, float, float],
-                rest: float = 1.0) -> np.ndarray:
-    """Interface blocks [F, 2, 2, 3 n, 3 n] (sides minus, plus); weights (penalty, consistency with the
-    minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ. ``rest``: the penalty's
-    weight on the part of the jump with zero mean over the face (its mean has weight 1)."""
+                rest: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Interface blocks (blocks [U, 2, 2, 3 n, 3 n] (sides minus, plus), pick [F]): face f's blocks are
+    blocks[pick[f]]; faces between full cells share one reference block per axis. weights (penalty,
+    consistency with the minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ.
+    ``rest``: the penalty's weight on the part of the jump with zero mean over the face (its mean has
+    weight 1). Computed FACE_CHUNK faces at a time: the face integrals take half a block's memory each."""
     s = 3 * basis.size
-    F = len(el.minus)
-    out = np.empty((F, 2, 2, s, s))
     penalty = face_penalty(el, eta)
     ref = el.reference_faces
     # one reference face per axis, then every other face
     picks = [np.nonzero(ref & (el.axis == a))[0][:1] for a in range(3)]
     todo = np.concatenate(picks + [np.nonzero(~ref)[0]]).astype(np.int64)
-    if len(todo) == 0:
-        return out
-    M, N, P = face_products(el, basis, todo, rest)
     blocks = np.empty((len(todo), 2, 2, s, s))
-    kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(P), np.ascontiguousarray(N),
-                        el.axis[todo].astype(np.int32),
-                        np.ascontiguousarray(penalty[todo]), mu, lam, *weights, blocks)
+    for lo in range(0, len(todo), FACE_CHUNK):
+        faces = todo[lo:lo + FACE_CHUNK]
+        M, N, P = face_products(el, basis, faces, rest)
+        kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(P), np.ascontiguousarray(N),
+                            el.axis[faces].astype(np.int32), np.ascontiguousarray(penalty[faces]), mu, lam, *weights,
+                            blocks[lo:lo + len(faces)])
+    pick = np.empty(len(el.minus), dtype=np.int64)
     start = 0
-    for a, pick in enumerate(picks):
-        if len(pick):
-            out[ref & (el.axis == a)] = blocks[start]
+    for a, first in enumerate(picks):
+        if len(first):
+            pick[ref & (el.axis == a)] = start
             start += 1
-    out[~ref] = blocks[start:]
-    return out
+    pick[~ref] = start + np.arange(int((~ref).sum()))
+    return blocks, pick
 
 
 def nitsche_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, triangles: np.ndarray,
@@ -108,32 +111,47 @@ def nitsche_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float
     return out, penalty, low
 
 
-def to_matrix(blocks: Blocks, count: int) -> sp.csr_matrix:
-    """Sum duplicate blocks, mirror the off-diagonal ones, and return the CSR matrix [count s]^2."""
-    s = blocks.data.shape[1]
-    off = blocks.rows != blocks.cols
-    rows = np.concatenate([blocks.rows, blocks.cols[off]])
-    cols = np.concatenate([blocks.cols, blocks.rows[off]])
-    key = rows.astype(np.int64) * count + cols
-    order = np.argsort(key, kind="stable")
-    key = key[order]
-    first = np.concatenate([[True], key[1:] != key[:-1]]) if len(key) else np.zeros(0, bool)
-    starts = np.nonzero(first)[0]
-    data = np.empty((len(starts), s, s))
-    n_direct = len(blocks.rows)
-    # sum in chunks so the mirrored copies are formed without a second full data array
-    for lo in range(0, len(starts), 4096):
-        hi = min(lo + 4096, len(starts))
-        seg = order[starts[lo]:(starts[hi] if hi < len(starts) else len(order))]
-        src = np.where(seg < n_direct, seg, 0)
-        part = blocks.data[src]
-        mirrored = seg >= n_direct
-        if np.any(mirrored):
-            part[mirrored] = blocks.data[np.nonzero(off)[0][seg[mirrored] - n_direct]].transpose(0, 2, 1)
-        data[lo:hi] = np.add.reduceat(part, starts[lo:hi] - starts[lo], axis=0)
-    urow, ucol = key[starts] // count, key[starts] % count
+def to_matrix(groups: list[Group], count: int) -> sp.bsr_matrix:
+    """Sum the groups' blocks (duplicates added, off-diagonal ones mirrored) into one block-sparse
+    matrix [count s]^2 with blocks [s, s], sorted. Each group is added from its stored (shared) blocks
+    into the matrix's own storage: concatenating the groups first held a copy of every block per pair
+    (at 32^3, k = 2 about 1 GB of the 5.3 GB peak)."""
+    s = groups[0].data.shape[-1]
+    parts = []
+    for g in groups:
+        rows, cols = g.rows.astype(np.int64), g.cols.astype(np.int64)
+        off = rows != cols
+        parts += [rows * count + cols, cols[off] * count + rows[off]]
+    keys = np.unique(np.concatenate(parts))
+    del parts
+    data = np.zeros((len(keys), s, s))
+    for g in groups:
+        rows, cols = g.rows.astype(np.int64), g.cols.astype(np.int64)
+        source = g.pick if g.pick is not None else np.arange(len(g))
+        off = rows != cols
+        for key, pick, blocks in ((rows * count + cols, source, g.data),
+                                  (cols[off] * count + rows[off], source[off], g.data.transpose(0, 2, 1))):
+            slots = np.searchsorted(keys, key)
+            # rounds of distinct slots (an element's diagonal block comes from up to 3 faces of a group),
+            # each summed with one fancy-indexed add
+            order = np.argsort(slots, kind="stable")
+            sorted_slots = slots[order]
+            first = np.concatenate([[True], sorted_slots[1:] != sorted_slots[:-1]]) if len(slots) else np.zeros(0, bool)
+            run_start = np.maximum.accumulate(np.where(first, np.arange(len(slots)), 0))
+            rank = np.empty(len(slots), dtype=np.int64)
+            rank[order] = np.arange(len(slots)) - run_start
+            for r in range(int(rank.max(initial=-1)) + 1):
+                take = np.nonzero(rank == r)[0]
+                for lo in range(0, len(take), CHUNK):
+                    part = take[lo:lo + CHUNK]
+                    data[slots[part]] += blocks[pick[part]]
     indptr = np.zeros(count + 1, dtype=np.int64)
-    np.add.at(indptr, urow + 1, 1)
-    indptr = np.cumsum(indptr)
-    bsr = sp.bsr_matrix((data, ucol, indptr), shape=(count * s, count * s))
-    return bsr.tocsr()
+    np.add.at(indptr, keys // count + 1, 1)
+    return sp.bsr_matrix((data, (keys % count).astype(np.int32), np.cumsum(indptr)), shape=(count * s, count * s))
+
+
+def add_to_diagonal(A: sp.bsr_matrix, value: float) -> None:
+    """A += value I in place (A from :func:`to_matrix`: every diagonal block stored)."""
+    rows = np.repeat(np.arange(len(A.indptr) - 1), np.diff(A.indptr))
+    diagonal = np.nonzero(A.indices == rows)[0]
+    A.data[diagonal] += value * np.eye(A.blocksize[0])

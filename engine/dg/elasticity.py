@@ -18,7 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..boundary import Prescribed, hold_warnings
 from ..errors import VoxelasticError
@@ -27,12 +26,14 @@ from ..geometry.surface import Surface
 from ..material import Material
 from ..method import Setup, State, no_progress
 from ..solvers.direct import DirectSolver, NotPositiveDefinite
-from ..solvers.linear import SolveStats
-from . import assembly, warping
+from ..solvers.linear import SolverError, SolveStats
+from ..solvers.pmultigrid import PMultigrid
+from . import assembly, basis as B, warping
 from .boundary_terms import BoundaryTerms
 from .fields import Fields
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .integrals import Basis, make_basis
+from .problem import DIRECT_LIMIT
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
@@ -66,6 +67,9 @@ class DGElasticity(BoundaryTerms, Fields):
     surface_loads: list = field(default_factory=list)
     body_force: np.ndarray | Callable | None = None
     merge_fraction: float = MERGE_FRACTION
+    solver_kind: str = "auto"  # "direct" (sparse Cholesky), "iterative" (p-multigrid CG) or "auto" (by size)
+    rtol: float = 1e-8  # relative residual of the iterative solver
+    max_iterations: int = 5000
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
 
@@ -74,6 +78,8 @@ class DGElasticity(BoundaryTerms, Fields):
             raise VoxelasticError(f"method.degree: 1 or 2, got {self.degree}")
         if self.flux not in ("ip", "bz"):
             raise VoxelasticError(f"method.flux: 'ip' or 'bz', got {self.flux!r}")
+        if self.solver_kind not in ("auto", "direct", "iterative"):
+            raise VoxelasticError(f"method.solver: 'auto', 'direct' or 'iterative', got {self.solver_kind!r}")
         if self.cut.degree < 2 * self.degree:
             raise VoxelasticError(f"dg: degree {self.degree} needs moments of degree {2 * self.degree}, "
                                   f"the slicing has {self.cut.degree}")
@@ -106,7 +112,7 @@ class DGElasticity(BoundaryTerms, Fields):
         self.dt: float | None = None
         self.rotations: np.ndarray | None = None
         self.warp_load = None
-        self.solver: DirectSolver | None = None  # the factorised system; None once released
+        self.solver: DirectSolver | PMultigrid | None = None  # the set-up solver; None once released
         self._last_u: np.ndarray | None = None  # the corotated fixed point's start: the last solution
         self._gradients: np.ndarray | None = None  # warping.mean_gradients, when the model warps
         say("assembly and factorisation", 0.6)
@@ -128,37 +134,55 @@ class DGElasticity(BoundaryTerms, Fields):
         """Penalty weight on the zero-mean part of interface jumps (JUMP_REST; BZ: 1)."""
         return JUMP_REST[self.degree] if self.flux == "ip" else 1.0
 
+    @property
+    def iterative(self) -> bool:
+        """Whether the system is solved by p-multigrid CG (``solver_kind``; "auto": above DIRECT_LIMIT[degree] unknowns)."""
+        return self.solver_kind == "iterative" or (self.solver_kind == "auto" and self.size > DIRECT_LIMIT[self.degree])
+
     def _build(self) -> None:
-        """Assemble and factorise; double eta until an IP matrix is positive definite."""
+        """Assemble and set up the solver; double eta until an IP matrix is positive definite."""
         for attempt in range(MAX_DOUBLINGS + 1):
             t = time.perf_counter()
             groups, self.eta_b = self._groups()
             if self.rotations is not None:
                 X0 = warping.reference_state(self.elements, self.basis)
                 groups, self.warp_load = warping.rotate(groups, self.rotations, X0)
-            A = assembly.to_matrix(assembly.Blocks(np.concatenate([g.rows for g in groups]),
-                                                   np.concatenate([g.cols for g in groups]),
-                                                   np.concatenate([g.data for g in groups])), self.elements.count)
+            A = assembly.to_matrix(groups, self.elements.count)
+            del groups
             if self.dt is not None:
-                A = A + sp.identity(A.shape[0], format="csr") * (self.material.density * self.basis.h**3 / self.dt**2)
-            self.matrix = A
+                assembly.add_to_diagonal(A, self.material.density * self.basis.h**3 / self.dt**2)
             self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t
             t = time.perf_counter()
+            modes = self._mode_matrix() if self.modes else None
             try:
-                self.solver = DirectSolver(A, self._mode_matrix() if self.modes else None)
+                if self.iterative:
+                    # the degree k - 1 functions come first in every component's orthonormal basis
+                    n, low = self.n, B.size(self.degree - 1)
+                    coarse = (np.arange(3)[:, None] * n + np.arange(low)[None, :]).reshape(-1)
+                    self.matrix = A
+                    self.solver = PMultigrid(A, 3 * n, coarse, modes, rtol=self.rtol,
+                                             max_iterations=self.max_iterations)
+                else:
+                    self.matrix = A = A.tocsr()
+                    self.solver = DirectSolver(A, modes)
                 self.timings["factorisation"] = self.timings.get("factorisation", 0.0) + time.perf_counter() - t
                 break
             except NotPositiveDefinite:
                 self.timings["factorisation"] = self.timings.get("factorisation", 0.0) + time.perf_counter() - t
-                if self.flux == "bz" and self.patches["count"] == 0:
-                    raise VoxelasticError("dg: the BZ matrix is not positive definite; the geometry is degenerate")
-                self.eta *= 2
+                self._double_penalty()
         else:
             raise VoxelasticError(f"dg: the matrix is not positive definite even with penalty {self.eta:g}")
         if self.eta != self.penalty and not any(w.startswith("the penalty was doubled") for w in self.warnings):
             self.warnings.append(f"the penalty was doubled to {self.eta:g} (from {self.penalty:g}) until the matrix "
                                  "was positive definite")
         self._dirichlet_cache = None
+
+    def _double_penalty(self) -> None:
+        if self.flux == "bz" and self.patches["count"] == 0:
+            raise VoxelasticError("dg: the BZ matrix is not positive definite; the geometry is degenerate")
+        if self.eta >= self.penalty * 2**MAX_DOUBLINGS:
+            raise VoxelasticError(f"dg: the matrix is not positive definite even with penalty {self.eta:g}")
+        self.eta *= 2
 
     def set_rotations(self, rotations: np.ndarray) -> None:
         """Warp the operator by element rotations [E, 3, 3] (corotated model) and refactorise."""
@@ -179,13 +203,14 @@ class DGElasticity(BoundaryTerms, Fields):
         warp = self.material.model == "corotated"
         ip = 1.0 if self.flux == "ip" else 0.0
         every = np.arange(E)
-        groups = [assembly.Group(every, every, self.element_blocks, every if warp else None)]
+        blocks, pick = self.element_blocks
+        groups = [assembly.Group(every, every, blocks, every if warp else None, pick)]
 
         def faces(weights, owner) -> None:
-            b = assembly.face_blocks(el, basis, mu, lam, eta, weights, self.jump_rest)
-            groups.extend([assembly.Group(el.minus, el.minus, b[:, 0, 0], owner),
-                           assembly.Group(el.plus, el.plus, b[:, 1, 1], owner),
-                           assembly.Group(el.minus, el.plus, b[:, 0, 1], owner)])
+            b, pick = assembly.face_blocks(el, basis, mu, lam, eta, weights, self.jump_rest)
+            groups.extend([assembly.Group(el.minus, el.minus, b[:, 0, 0], owner, pick),
+                           assembly.Group(el.plus, el.plus, b[:, 1, 1], owner, pick),
+                           assembly.Group(el.minus, el.plus, b[:, 0, 1], owner, pick)])
 
         if warp:
             faces((1.0, 0.0, 0.0), None)
@@ -228,7 +253,7 @@ class DGElasticity(BoundaryTerms, Fields):
             state = self._solve_corotated(load_scale, value_scale, inertia, on_iteration, t0)
             state.load_scale = load_scale  # the surface stress carries this share of the loads
             return state
-        u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration)
+        u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration, x0)
         return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
 
     def _solve_corotated(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
@@ -264,9 +289,23 @@ class DGElasticity(BoundaryTerms, Fields):
         return b.reshape(-1)
 
     def _linear_solve(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
-                      on_iteration: Callable[[int, float], None] | None = None) -> tuple[np.ndarray, SolveStats]:
-        """Coefficients [E, 3, n] of one solve with the current factorisation, and its statistics."""
-        x, stats = self.solver.solve(self._rhs(load_scale, value_scale, inertia), on_iteration=on_iteration)
+                      on_iteration: Callable[[int, float], None] | None = None, x0: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, SolveStats]:
+        """Coefficients [E, 3, n] of one solve with the current solver (the iterative one starts from x0
+        [E, 3, n] where given: the last step's solution), and its statistics. CG meeting a
+        direction of non-positive curvature is the iterative path's sign of a matrix that is not
+        positive definite: the penalty doubles as it does on a failed Cholesky."""
+        while True:
+            try:
+                start = None if x0 is None or not self.iterative else np.asarray(x0, dtype=np.float64).reshape(-1)
+                x, stats = self.solver.solve(self._rhs(load_scale, value_scale, inertia), start, on_iteration)
+                break
+            except SolverError as exc:
+                if exc.reason != "indefinite" or not self.iterative:
+                    raise
+                self.release_solver()
+                self._double_penalty()
+                self._build()
         return x.reshape(self.elements.count, 3, self.n), stats
 
     def condition_estimate(self) -> float:

@@ -85,9 +85,10 @@ def make_basis(el: Elements, degree: int) -> Basis:
 
 def gradient_products(T: np.ndarray, H: np.ndarray, h: float, degree: int) -> np.ndarray:
     """D[b, a, c, I, J] = int d_a psi_I d_c psi_J dV [m] for rows T [B, n, n] and Hankel H [B, n, n]."""
-    G = np.einsum("bis,ast->bait", T, B.derivative(degree))  # [B, 3, n, n] gradient coefficients
-    GH = np.einsum("bait,btu->baiu", G, H)
-    return h * np.einsum("baiu,bcju->bacij", GH, G)
+    # batched matmul here and in face_products, not einsum: 8-20x faster on these tiny products
+    G = T[:, None] @ B.derivative(degree)[None]  # [B, 3, n, n] gradient coefficients
+    GH = G @ H[:, None]
+    return h * (GH[:, :, None] @ G[:, None].swapaxes(-1, -2))
 
 
 def element_gradients(el: Elements, basis: Basis) -> tuple[np.ndarray, np.ndarray]:
@@ -117,23 +118,23 @@ def face_products(el: Elements, basis: Basis, faces: np.ndarray, rest: float = 1
     A = []
     for e in sides:
         offset = (el.face_cell[faces] - el.cell[e]).astype(np.float64)  # face frame - element frame [cells]
-        A.append(np.einsum("fis,fst->fit", basis.T[e], B.shift(k, offset)))
+        A.append(basis.T[e] @ B.shift(k, offset))
     D = B.derivative(k)
     n = basis.size
     M = np.empty((len(faces), 2, 2, n, n))
     N = np.empty((len(faces), 2, 2, 3, n, n))
     # H[:, s, 0] are the face moments of monomial s (monomial 0 is 1): the basis' face integrals
-    means = [h**2 * np.einsum("fis,fs->fi", A[X], H[:, :, 0]) for X in range(2)]
+    means = [h**2 * (A[X] @ H[:, :, :1])[:, :, 0] for X in range(2)]
     area = h**2 * H[:, 0, 0]
     for X in range(2):
-        AH = np.einsum("fis,fst->fit", A[X], H)
+        AH = A[X] @ H
         for Y in range(2):
-            M[:, X, Y] = h**2 * np.einsum("fit,fjt->fij", AH, A[Y])
+            M[:, X, Y] = h**2 * (AH @ A[Y].swapaxes(-1, -2))
             if rest != 1.0:
                 mean = means[X][:, :, None] * means[Y][:, None, :] / area[:, None, None]
                 M[:, X, Y] = mean + rest * (M[:, X, Y] - mean)
-            dY = np.einsum("fjs,ast->fajt", A[Y], D)
-            N[:, X, Y] = h * np.einsum("fit,fajt->faij", AH, dY)
+            dY = A[Y][:, None] @ D[None]  # [F, 3, n, n]
+            N[:, X, Y] = h * (AH[:, None] @ dY.swapaxes(-1, -2))
     return M, N, low_products(A, H, el.axis[faces], k, h)
 
 
@@ -155,10 +156,10 @@ def low_products(A: list[np.ndarray], H: np.ndarray, axis: np.ndarray, degree: i
             continue
         S = np.nonzero(low & (exps[:, a] == 0))[0]
         W = pseudo_root(H[on][:, S[:, None], S[None, :]])
-        R = [np.einsum("fit,ftu->fiu", A[X][on] @ H[on][:, :, S], W) for X in range(2)]
+        R = [A[X][on] @ H[on][:, :, S] @ W for X in range(2)]
         for X in range(2):
             for Y in range(2):
-                P[on, X, Y] = h**2 * np.einsum("fiu,fju->fij", R[X], R[Y])
+                P[on, X, Y] = h**2 * (R[X] @ R[Y].swapaxes(-1, -2))
     return P
 
 

@@ -12,18 +12,39 @@ from ..method import Setup
 if TYPE_CHECKING:
     from .elasticity import DGElasticity
 
+# Above this many unknowns "auto" solves by p-multigrid CG instead of sparse Cholesky, whose fill grows
+# superlinearly. Measured on the k = 2 shell, one static solve, assembly + solve (docs/benchmarks.md, "DG
+# at scale"): Cholesky / CG to rtol 1e-8 2.4 / 2.0 s at 24k unknowns, 6.2 / 3.4 s at 55k, 38 / 11 s at
+# 183k; k = 1 1.1 / 1.2 s at 22k, 3.8 / 4.0 s at 73k, 13 / 7.1 s at 171k. Below the limits the factor,
+# reused by every load and time step (0.4 s a solve at 55k against CG's 1.4 s), is the better buy.
+DIRECT_LIMIT = {1: 100_000, 2: 50_000}
+
 
 def estimate_memory(grid: Grid, method_spec) -> int:
-    """Upper estimate of a job's peak memory [bytes] from the grid alone: per cell, 7 blocks
-    (element + 6 faces) of (d * basis)^2 doubles, times 4 for assembly copies, times the sparse
-    Cholesky factor's fill, which grows like the grid's side in 3D (nested dissection). Measured
-    peaks on the sphere shell (`python -m benchmarks scaling`, grids 18^3 / 26^3 / 34^3): k = 2
-    1.51 / 5.34 / 14.5 GiB, k = 1 0.48 / 1.11 / 2.60 GiB; this estimate is 1.0-1.4x those from 26^3
-    on (below, the process's own ~0.3 GiB dominates; before the fill factor it was 0.5-0.8x)."""
+    """Upper estimate of a job's peak memory [bytes] from the grid alone, for the solver the job will
+    use (``method.solver``; "auto" can be either, so the larger of the two, the direct one at most at
+    its size limit). Per cell 7 blocks (element + 6 faces) of (d * basis)^2 doubles; the direct solve
+    holds them 4 times over (assembly copies) times the sparse Cholesky factor's fill, which grows like
+    the grid's side in 3D (nested dissection); the iterative one holds them twice and factorises only
+    its degree k - 1 coarse level. Measured peaks on the sphere shell (`python -m benchmarks scaling`),
+    direct, grids 18^3 / 26^3 / 34^3: k = 2 1.51 / 5.34 / 14.5 GiB, k = 1 0.48 / 1.11 / 2.60 GiB (this
+    estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1 0.71 GiB (estimate 2.0x, 1.4x: the shell
+    fills 36% of its cells)."""
     d, cells, degree = grid.dim, grid.num_cells, method_spec.degree
-    basis = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
-    fill = max(1.0, cells ** (1 / d) / 12) if d == 3 else 1.0
-    return int(cells * 7 * (d * basis) ** 2 * 8 * 4 * fill)
+    size = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
+    low = {1: 1, 2: 4}[degree] if d == 3 else {1: 1, 2: 3}[degree]
+
+    def direct(count: float, basis: int) -> float:
+        fill = max(1.0, count ** (1 / d) / 12) if d == 3 else 1.0
+        return count * 7 * (d * basis) ** 2 * 8 * 4 * fill
+
+    iterative = cells * 7 * (d * size) ** 2 * 8 * 2 + direct(cells, low)
+    kind = getattr(method_spec, "solver", "auto")
+    if kind == "direct":
+        return int(direct(cells, size))
+    if kind == "iterative":
+        return int(iterative)
+    return int(max(iterative, direct(min(cells, DIRECT_LIMIT[degree] / (d * size)), size)))
 
 
 def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity:
@@ -35,4 +56,5 @@ def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity
     m = spec.method
     return DGElasticity(cut=geo.cut_cells, surface=geo.surface, material=material, degree=m.degree, flux=m.flux,
                         penalty=m.penalty, prescribed=b.prescribed, surface_loads=b.loads, body_force=b.body_force,
+                        solver_kind=m.solver, rtol=spec.solver.rtol, max_iterations=spec.solver.max_iterations,
                         progress=progress)

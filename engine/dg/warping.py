@@ -85,10 +85,10 @@ def rotate(groups: list[Group], R: np.ndarray, X0: np.ndarray) -> tuple[list[Gro
         if g.owner is None:
             out.append(g)
             continue
-        full = np.empty_like(g.data)
-        for a in range(0, len(g.data), CHUNK):
-            part = slice(a, min(a + CHUNK, len(g.data)))
-            data, owner, rows, cols = g.data[part], g.owner[part], g.rows[part], g.cols[part]
+        full = np.empty((len(g),) + g.data.shape[1:])
+        for a in range(0, len(g), CHUNK):
+            part = slice(a, min(a + CHUNK, len(g)))
+            data, owner, rows, cols = g.blocks(part), g.owner[part], g.rows[part], g.cols[part]
             warped = _rotated(data, owner, owner, Rx, out=full[part])
             half = _rotated(data, owner, np.full(len(owner), E), Rx)
             np.add.at(load, rows, np.einsum("kij,kj->ki", half - warped, X0f[cols]))
