@@ -132,11 +132,10 @@ def _solver(name: str, resolution: int, degree: int, queue) -> None:
         if info != 0:
             x = np.full_like(b, np.nan)
     elif name == "pmg-cg":
-        from engine.dg.basis import size
+        from engine.dg.elasticity import degree_chain
         from engine.solvers.pmultigrid import PMultigrid
 
-        coarse = (np.arange(3)[:, None] * m.n + np.arange(size(degree - 1))[None, :]).reshape(-1)
-        pmg = PMultigrid(A, 3 * m.n, coarse, rtol=1e-10)
+        pmg = PMultigrid(A, 3 * m.n, degree_chain(degree), rtol=1e-10)
         t1 = time.perf_counter()
         x, stats = pmg.solve(b)
         its = [1] * stats.iterations

@@ -21,11 +21,12 @@ Per run: DOFs (unknowns solved: staggered, the free displacement components; DG,
 basis size), active cells (volume fraction > 0) and DG elements (after merging small pieces),
 job time [s] (around ``engine.pipeline.run``: runtime init, geometry, discretisation, solve,
 fields), solve time [s] (staggered: multigrid-preconditioned CG, the hierarchy is built in the
-discretisation; DG: the PARDISO factorisation, which happens while discretising, plus the
-solve: the prescribed values' right-hand side, back-substitution, residual), the pipeline's
-stage times (and DG's own: basis, element blocks, loads, assembly, factorisation), peak RSS [GiB]
-(the job's process; DG slicing workers separately), CG iterations and final relative residual
-(DG: 1 direct solve).
+discretisation; DG: the solver's set-up, which happens while discretising -- the PARDISO
+factorisation, or above the size limit the p-multigrid's coarse factorisation -- plus the solve:
+the prescribed values' right-hand side, back-substitution or CG to the job's rtol, residual), the
+pipeline's stage times (and DG's own: basis, element blocks, loads, assembly, factorisation), peak
+RSS [GiB] (the job's process; DG slicing workers separately), CG iterations and final relative
+residual (DG: 1 for a direct solve).
 
 Output: a markdown table, the fitted exponents p of time ~ DOFs^p (and of peak RSS) per method,
 by least squares on log-log over the sizes from the second smallest up (the smallest is dominated

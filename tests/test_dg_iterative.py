@@ -3,8 +3,8 @@
     .venv/bin/python -m pytest -q tests/test_dg_iterative.py
 
 The two solve the same matrix, so to a tight rtol they must give the same coefficients: clamped and
-free (rigid modes bordered out), k = 1 (coarse space: constants) and k = 2 (coarse: k = 1), statics
-and a backward-Euler step, and a penalty too small to be positive definite (CG finds the negative
+free (rigid modes bordered out), k = 1 (coarse space: constants) and k = 2 (coarse: k = 1, and below
+it the constants when that level is large), statics and a backward-Euler step, and a penalty too small to be positive definite (CG finds the negative
 curvature and the penalty doubles as it does on a failed Cholesky). Its speed at scale is measured in
 ``benchmarks.dg`` (docs/benchmarks.md, "DG at scale").
 """
@@ -56,14 +56,19 @@ def test_iterations_do_not_grow_with_the_grid():
     assert max(counts) <= 1.3 * min(counts), counts
 
 
-@pytest.mark.parametrize("degree", [1, 2])
-def test_a_free_body_keeps_its_rigid_modes_out_of_the_iterative_solution(degree):
+def free_sphere(degree: int, kind: str) -> DGElasticity:
+    """A thick sphere (radii 1, 0.5) under internal pressure and no displacement boundary."""
     s, cut = sphere_cut(6, 1.0, 0.5)
     inner = SurfaceLoad(EVERYWHERE, "inside", pressure=1.0)
     inner.region = type("Inner", (), {"clip": lambda self, f, tolerance=None: (
         f[np.linalg.norm(f.mean(axis=1), axis=1) < 0.75], np.nonzero(np.linalg.norm(f.mean(axis=1), axis=1) < 0.75)[0])})()
-    runs = [DGElasticity(cut=cut, surface=s, material=MAT, degree=degree, flux="ip", surface_loads=[inner],
-                         solver_kind=kind, rtol=RTOL) for kind in ("direct", "iterative")]
+    return DGElasticity(cut=cut, surface=s, material=MAT, degree=degree, flux="ip", surface_loads=[inner],
+                        solver_kind=kind, rtol=RTOL)
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_a_free_body_keeps_its_rigid_modes_out_of_the_iterative_solution(degree):
+    runs = [free_sphere(degree, kind) for kind in ("direct", "iterative")]
     assert runs[1].modes and runs[1].solver.modes is not None  # six free rigid motions
     a, b = (m.solve() for m in runs)
     assert relative(b.u, a.u) < 1e-8
@@ -106,3 +111,17 @@ def test_auto_picks_by_size():
         assert bar(0.25, degree=1).solver.backend.startswith("pmg-cg")
     finally:
         elasticity.DIRECT_LIMIT.update(elasticity_limit)
+
+
+@pytest.mark.parametrize("free", [False, True])
+def test_three_levels_when_the_k1_level_is_large(monkeypatch, free):
+    # above COARSE_DIRECT coarse unknowns the k = 1 level is cycled over the constants, not factorised
+    from engine.solvers import pmultigrid
+
+    monkeypatch.setattr(pmultigrid, "COARSE_DIRECT", 100)
+    make = (lambda kind: free_sphere(2, kind)) if free else (lambda kind: bar(0.125, degree=2, solver_kind=kind))
+    runs = [make(kind) for kind in ("direct", "iterative")]
+    assert len(runs[1].solver.top.sizes) == 3, runs[1].solver.backend
+    a, b = (m.solve() for m in runs)
+    assert b.stats.residual <= RTOL
+    assert relative(b.u, a.u) < 1e-7

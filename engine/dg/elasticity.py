@@ -52,6 +52,14 @@ JUMP_REST = {1: 0.1, 2: 1.0}
 MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means something else is wrong
 
 
+def degree_chain(degree: int) -> list[np.ndarray]:
+    """The p-multigrid's levels below degree k: per level, the places of the degree-(j - 1) functions
+    among a block of degree j's (three components of C(j + 3, 3) functions each). They come first in
+    every component's orthonormal basis, which is built degree by degree."""
+    return [(np.arange(3)[:, None] * B.size(j) + np.arange(B.size(j - 1))[None, :]).reshape(-1)
+            for j in range(degree, 0, -1)]
+
+
 @dataclass
 class DGElasticity(BoundaryTerms, Fields):
     """The DG method on one sliced geometry. ``loads`` are staggered-style ``SurfaceLoad`` objects
@@ -156,11 +164,8 @@ class DGElasticity(BoundaryTerms, Fields):
             modes = self._mode_matrix() if self.modes else None
             try:
                 if self.iterative:
-                    # the degree k - 1 functions come first in every component's orthonormal basis
-                    n, low = self.n, B.size(self.degree - 1)
-                    coarse = (np.arange(3)[:, None] * n + np.arange(low)[None, :]).reshape(-1)
                     self.matrix = A
-                    self.solver = PMultigrid(A, 3 * n, coarse, modes, rtol=self.rtol,
+                    self.solver = PMultigrid(A, 3 * self.n, degree_chain(self.degree), modes, rtol=self.rtol,
                                              max_iterations=self.max_iterations)
                 else:
                     self.matrix = A = A.tocsr()

@@ -1,18 +1,19 @@
-"""Two-level p-multigrid preconditioned CG for block systems with hierarchical bases (DG at scale).
+"""p-multigrid preconditioned CG for block systems with hierarchical bases (DG at scale).
 
-The fine space holds one dense block of s unknowns per element; the same ``coarse`` subset of every
-block spans a lower polynomial degree (DG's orthonormal bases are built degree by degree, so the first 4
-of k = 2's 10 functions per component are exactly the k = 1 space). The preconditioner is one
-symmetric V-cycle over the two levels: ``SMOOTHING_STEPS`` damped block-Jacobi steps (each
-element's own s x s block inverted), the Galerkin coarse matrix A[coarse, coarse] (the coarse
-prolongation is an injection, so P^T A P is a submatrix) factorised once by sparse Cholesky, and
-the same smoothing after it. Rigid modes a body keeps free are bordered out of the coarse solve and
-projected out of every preconditioned residual.
+The fine space holds one dense block of s unknowns per element; the same subset of every block
+spans a lower polynomial degree (DG's orthonormal bases are built degree by degree, so the first 4
+of k = 2's 10 functions per component are exactly the k = 1 space, and the first of those the
+constants). Prolongation is an injection, so each Galerkin coarse matrix P^T A P is read off the
+blocks above it. The preconditioner is one symmetric V-cycle: on every level ``SMOOTHING_STEPS``
+damped block-Jacobi steps (each element's own block inverted) before and after the correction
+from the level below; the bottom level (k - 1, or below that the constants once the k - 1 level
+passes COARSE_DIRECT unknowns) is factorised once by sparse Cholesky. Rigid modes a body keeps
+free are bordered out of the bottom factor and projected out of every preconditioned residual.
 
 Why (docs/benchmarks.md, "DG at scale"): the sparse Cholesky of the full k = 2 system fills
-superlinearly (32^3 shell, 427k unknowns: 333 s and 14.5 GiB), while the k = 1 coarse system has 0.4x
-the unknowns and 0.16x the nonzeros and the iteration count does not grow with the grid (28-30 at
-16^3 and 32^3 to rtol 1e-10).
+superlinearly (32^3 shell, 427k unknowns: 333 s and 14.5 GiB), while the k = 1 level has 0.4x the
+unknowns and 0.16x the nonzeros, and with it factorised the iteration count does not grow with the
+grid (23-24 from 12^3 to 32^3 to rtol 1e-8).
 """
 
 from __future__ import annotations
@@ -30,6 +31,10 @@ from .linear import SolveStats
 SMOOTHING_STEPS = 2  # before and after the coarse solve: 28 iterations at 16^3 (1 step: 36, 3: 26, equal time)
 DAMPING = 1.5  # x += DAMPING / lambda_max(D^-1 A) D^-1 r: inside the smoother's stability bound of 2
 POWER_STEPS = 20  # power iteration for lambda_max(D^-1 A); it approaches from below, hence DAMPING < 2
+# A coarse level with more unknowns than this is itself cycled, not factorised: the k = 1 level's factor
+# fills superlinearly (170,880 unknowns: 15 s, 1.8 GiB; 567,072: ~150 s, ~10 GiB), while cycling it over
+# the constants costs iterations (the 32^3 shell: 24 -> 86, 26.5 -> 38 s, 3.0 -> 1.8 GiB)
+COARSE_DIRECT = 300_000
 
 
 class ArraySpace:
@@ -58,56 +63,44 @@ class ArraySpace:
         return bool(np.all(np.isfinite(x)))
 
 
-class PMultigrid:
-    """A :class:`~engine.solvers.linear.LinearSolver` for A [n, n] (symmetric, block sparse with
-    blocks [s, s]) by CG preconditioned with the two-level V-cycle above.
+class Level:
+    """One level of the V-cycle: A [n, n] block-sparse with blocks [s, s], its block-Jacobi smoother,
+    and below it the Galerkin level of ``chain[0]`` (the coarse unknowns' places within a block):
+    another ``Level`` over ``chain[1:]`` where that level has more than COARSE_DIRECT unknowns and
+    the chain goes on, else its sparse Cholesky (free ``modes`` [n, k] bordered out there)."""
 
-    coarse [c]: the coarse unknowns' places within a block (the same in every block). modes Q [n, k]
-    (orthonormal columns): rigid motions no boundary holds; A need be
-    positive definite only on their complement, b is taken without its part along them and the
-    solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a diagonal
-    block or the coarse matrix is not (then A is not either); CG raises ``SolverError`` with reason
-    "indefinite" when it meets a direction of non-positive curvature.
-    """
-
-    def __init__(self, A: sp.spmatrix, block: int, coarse: np.ndarray, modes: np.ndarray | None = None, *,
-                 rtol: float = 1e-8, max_iterations: int = 5000) -> None:
-        t0 = time.perf_counter()
-        self.matrix = A if sp.isspmatrix_bsr(A) and A.blocksize == (block, block) else sp.bsr_matrix(
-            A, blocksize=(block, block))
-        self.matrix.sort_indices()
+    def __init__(self, A: sp.bsr_matrix, chain: list[np.ndarray], modes: np.ndarray | None) -> None:
+        self.matrix = A
         self.n = A.shape[0]
-        self.block = block
-        self.modes = modes if modes is not None and modes.shape[1] else None
-        E = self.n // block
-        self.coarse = (np.arange(E)[:, None] * block + np.asarray(coarse)[None, :]).reshape(-1)
-        self._inverse_blocks = _diagonal_inverses(self.matrix)
+        s = A.blocksize[0]
+        E = self.n // s
+        sub = np.asarray(chain[0])
+        self.coarse = (np.arange(E)[:, None] * s + sub[None, :]).reshape(-1)
+        self._inverse_blocks = _diagonal_inverses(A)
         self._scale = DAMPING / self._lambda_max()
-        M = self.matrix
-        sub = np.asarray(coarse)
-        coarse_matrix = sp.bsr_matrix((M.data[:, sub][:, :, sub], M.indices, M.indptr),
-                                      shape=(E * len(sub), E * len(sub))).tocsr()
+        coarse = sp.bsr_matrix((A.data[:, sub][:, :, sub], A.indices, A.indptr), shape=(E * len(sub),) * 2)
         coarse_modes = None
-        if self.modes is not None:
+        if modes is not None:
             # the modes wholly inside the coarse space (singular value 1 of their restriction) are the
             # coarse matrix's null space: all rigid motions for k = 2 over k = 1, translations over k = 0
-            U, sigma, _ = np.linalg.svd(self.modes[self.coarse], full_matrices=False)
-            coarse_modes = U[:, sigma > 1 - 1e-8]
-        self.coarse_solver = DirectSolver(coarse_matrix, coarse_modes)
-        del coarse_matrix
-        self._pcg = PCG(ArraySpace(self.n), self._apply, self._precondition, rtol, max_iterations)
-        self.setup_seconds = time.perf_counter() - t0
+            U, sigma, _ = np.linalg.svd(modes[self.coarse], full_matrices=False)
+            coarse_modes = U[:, sigma > 1 - 1e-8] if np.any(sigma > 1 - 1e-8) else None
+        if len(chain) > 1 and coarse.shape[0] > COARSE_DIRECT:
+            self.below: Level | DirectSolver = Level(coarse, chain[1:], coarse_modes)
+        else:
+            self.below = DirectSolver(coarse.tocsr(), coarse_modes)
 
     @property
-    def backend(self) -> str:
-        """What solves: CG on the p-multigrid V-cycle, its coarse level by ``coarse_solver``."""
-        return f"pmg-cg ({self.coarse_solver.backend} on {len(self.coarse)} coarse unknowns)"
+    def sizes(self) -> list[int]:
+        """Unknowns per level, this one first."""
+        return [self.n] + (self.below.sizes if isinstance(self.below, Level) else [self.below.matrix.shape[0]])
 
-    def _apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        out[:] = self.matrix @ x
+    @property
+    def bottom(self) -> DirectSolver:
+        return self.below.bottom if isinstance(self.below, Level) else self.below
 
     def _jacobi(self, r: np.ndarray) -> np.ndarray:
-        s = self.block
+        s = self.matrix.blocksize[0]
         return (self._inverse_blocks @ r.reshape(-1, s, 1)).reshape(-1)
 
     def _lambda_max(self) -> float:
@@ -119,23 +112,66 @@ class PMultigrid:
             v = w / np.linalg.norm(w)
         return lam
 
+    def cycle(self, r: np.ndarray) -> np.ndarray:
+        """One symmetric V-cycle on r [n] from zero: smooth, coarse correction, smooth."""
+        w = self._scale
+        x = w * self._jacobi(r)
+        for _ in range(SMOOTHING_STEPS - 1):
+            x += w * self._jacobi(r - self.matrix @ x)
+        residual = (r - self.matrix @ x)[self.coarse]
+        if isinstance(self.below, Level):
+            x[self.coarse] += self.below.cycle(residual)
+        else:
+            x[self.coarse] += self.below.solve(residual)[0]
+        for _ in range(SMOOTHING_STEPS):
+            x += w * self._jacobi(r - self.matrix @ x)
+        return x
+
+    def free(self) -> None:
+        self.below.free()
+
+
+class PMultigrid:
+    """A :class:`~engine.solvers.linear.LinearSolver` for A [n, n] (symmetric, block sparse with
+    blocks [s, s]) by CG preconditioned with the p-multigrid V-cycle above.
+
+    chain: per level below the fine one, the coarse unknowns' places within a block of the level
+    above (the same in every block): for DG k = 2, the k = 1 functions among the 30, then the
+    constants among those 12. modes Q [n, k] (orthonormal columns): rigid motions no boundary holds;
+    A need be positive definite only on their complement, b is taken without its part along them and
+    the solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a
+    diagonal block or the bottom matrix is not (then A is not either); CG raises ``SolverError`` with
+    reason "indefinite" when it meets a direction of non-positive curvature.
+    """
+
+    def __init__(self, A: sp.spmatrix, block: int, chain: list[np.ndarray], modes: np.ndarray | None = None, *,
+                 rtol: float = 1e-8, max_iterations: int = 5000) -> None:
+        t0 = time.perf_counter()
+        self.matrix = A if sp.isspmatrix_bsr(A) and A.blocksize == (block, block) else sp.bsr_matrix(
+            A, blocksize=(block, block))
+        self.matrix.sort_indices()
+        self.n = A.shape[0]
+        self.modes = modes if modes is not None and modes.shape[1] else None
+        self.top = Level(self.matrix, chain, self.modes)
+        self._pcg = PCG(ArraySpace(self.n), self._apply, self._precondition, rtol, max_iterations)
+        self.setup_seconds = time.perf_counter() - t0
+
+    @property
+    def backend(self) -> str:
+        """What solves: CG on the p-multigrid V-cycle (unknowns per level), its bottom level by Cholesky."""
+        sizes = " > ".join(str(n) for n in self.top.sizes)
+        return f"pmg-cg ({sizes} unknowns, {self.top.bottom.backend} at the bottom)"
+
+    def _apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        out[:] = self.matrix @ x
+
     def _project(self, v: np.ndarray) -> np.ndarray:
         if self.modes is not None:
             v = v - self.modes @ (self.modes.T @ v)
         return v
 
     def _precondition(self, r: np.ndarray, out: np.ndarray) -> None:
-        """out = one symmetric V-cycle on r: smooth from zero, coarse correction, smooth."""
-        w = self._scale
-        x = w * self._jacobi(r)
-        for _ in range(SMOOTHING_STEPS - 1):
-            x += w * self._jacobi(r - self.matrix @ x)
-        residual = r - self.matrix @ x
-        correction, _ = self.coarse_solver.solve(residual[self.coarse])
-        x[self.coarse] += correction
-        for _ in range(SMOOTHING_STEPS):
-            x += w * self._jacobi(r - self.matrix @ x)
-        out[:] = self._project(x)
+        out[:] = self._project(self.top.cycle(r))
 
     def solve(self, b: np.ndarray, x: np.ndarray | None = None,
               on_iteration: Callable[[int, float], None] | None = None) -> tuple[np.ndarray, SolveStats]:
@@ -149,8 +185,8 @@ class PMultigrid:
         return self.solve(b)[0]
 
     def free(self) -> None:
-        """Release the coarse factor now (``DirectSolver.free``; idempotent)."""
-        self.coarse_solver.free()
+        """Release the bottom level's factor now (``DirectSolver.free``; idempotent)."""
+        self.top.free()
 
 
 def _diagonal_inverses(A: sp.bsr_matrix) -> np.ndarray:
