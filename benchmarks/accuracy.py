@@ -1,11 +1,12 @@
 """Run time against error, side by side in one run: voxelastic's methods and the peer (issue 6.1).
 
     .venv/bin/python -m benchmarks accuracy [--quick | --full] [--problems lame,annulus,ball]
-        [--methods staggered,dg1,dg2,p1,p2] [--repeats 3] [--out docs/accuracy]
+        [--methods staggered,dg1,dg2,p1,p2,p1-stl,p2-stl] [--repeats 3] [--out docs/accuracy]
 
 Problems and probes: ``verification.problems``. Methods: the staggered method, DG k = 1 and k = 2
 (IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
-scikit-fem P1 / P2 on gmsh meshes, pyamg CG) at several mesh sizes. Every run is a whole job in
+scikit-fem P1 / P2 on gmsh meshes of the CAD geometry, pyamg CG; with ``p1-stl`` / ``p2-stl`` on
+fTetWild's tetrahedra of the STL voxelastic reads, meshing counted) at several mesh sizes. Every run is a whole job in
 its own spawned process (geometry, discretisation, solve, fields at the probes; no geometry
 cache), twice: the first job is *cold* (what one CLI run costs: Taichi loads and compiles its
 kernels), the second *warm* (what a job costs a service worker that has run one before; kernels
@@ -42,17 +43,23 @@ TARGETS = (1e-2, 1e-3, 1e-4)
 # cell sizes h [m] (mesh sizes for the peer) per problem and method; --quick keeps the first few
 SIZES = {
     "lame": {"staggered": [1 / 6, 1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
-             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.2, 0.14, 0.1, 0.07], "p2": [0.4, 0.28, 0.2, 0.14]},
+             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.2, 0.14, 0.1, 0.07], "p2": [0.4, 0.28, 0.2, 0.14],
+             "p1-stl": [0.2, 0.14, 0.1, 0.07], "p2-stl": [0.4, 0.28, 0.2, 0.14]},
     # the ball's staggered error is noisy below 1 / 8 (0.03 to 0.10 over h = 1 / 5 .. 1 / 7: first-order
     # surface tractions and the cap's rim); from 1 / 8 on it falls steadily
     "ball": {"staggered": [1 / 8, 1 / 12, 1 / 16, 1 / 24, 1 / 32], "dg1": [1 / 4, 1 / 6, 1 / 8, 1 / 12],
-             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.28, 0.2, 0.14, 0.1], "p2": [0.4, 0.28, 0.2, 0.14]},
+             "dg2": [1 / 3, 1 / 4, 1 / 6, 1 / 8], "p1": [0.28, 0.2, 0.14, 0.1], "p2": [0.4, 0.28, 0.2, 0.14],
+             "p1-stl": [0.28, 0.2, 0.14, 0.1], "p2-stl": [0.4, 0.28, 0.2, 0.14]},
     "annulus": {"staggered": [1 / 20, 1 / 40, 1 / 80, 1 / 160, 1 / 320], "p1": [0.05, 0.025, 0.0125, 0.00625],
                 "p2": [0.1, 0.05, 0.025, 0.0125]},
 }
 QUICK = 3  # sizes per method with --quick
 LABELS = {"staggered": "voxelastic staggered", "dg1": "voxelastic DG k=1", "dg2": "voxelastic DG k=2",
-          "p1": "scikit-fem P1", "p2": "scikit-fem P2 (curved)"}
+          "p1": "scikit-fem P1", "p2": "scikit-fem P2 (curved)",
+          "p1-stl": "scikit-fem P1 (fTetWild on the STL)", "p2-stl": "scikit-fem P2 (fTetWild on the STL)"}
+# the peer's runs: on the CAD geometry (its best case) and on fTetWild's tetrahedra of the STL
+PEERS = ("p1", "p2", "p1-stl", "p2-stl")
+CAD_PEERS = ("p1", "p2")
 
 
 def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
@@ -103,11 +110,13 @@ def _peer(problem_name: str, method: str, h: float, queue) -> None:
     from benchmarks.peer import run_peer
     from verification.problems import problem
 
-    # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py)
+    # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py);
+    # "-stl": fTetWild's tetrahedra of the STL voxelastic reads, straight-sided
     order = int(method[1])
+    geometry = "stl" if method.endswith("-stl") else "curved" if order == 2 else "straight"
 
     def job() -> dict:
-        out = run_peer(problem_name, order, h, geometry="curved" if order == 2 else "straight")
+        out = run_peer(problem_name, order, h, geometry=geometry)
         return {k: v for k, v in out.items() if k not in ("error_u", "error_vm", "problem", "method", "h")}
 
     queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job))
@@ -116,7 +125,7 @@ def _peer(problem_name: str, method: str, h: float, queue) -> None:
 def _one(problem_name: str, method: str, h: float, timeout: float) -> dict:
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    target = _peer if method in ("p1", "p2") else _voxelastic
+    target = _peer if method in PEERS else _voxelastic
     proc = ctx.Process(target=target, args=(problem_name, method, h, q))
     t0 = time.perf_counter()
     proc.start()
@@ -175,24 +184,28 @@ def time_at(rows: list[dict], target: float, key: str = "error_u", clock: str = 
 
 
 def table(rows: list[dict], key: str = "error_u", clock: str = "seconds") -> str:
-    """Markdown: per problem and error target, each method's time and its ratio to the faster peer."""
+    """Markdown: per problem and error target, each method's time and its ratios to the faster peer on
+    the CAD geometry and, where run, on the STL (above 1: voxelastic is slower)."""
     lines = ["| problem | error target | " + " | ".join(LABELS[m] for m in LABELS) + " |",
              "|---|---|" + "---|" * len(LABELS)]
     for prob in dict.fromkeys(r["problem"] for r in rows):
         mine = [r for r in rows if r["problem"] == prob]
         for target in TARGETS:
             times = {m: time_at([r for r in mine if r["method"] == m], target, key, clock) for m in LABELS}
-            peers = [t for m, t in times.items() if m in ("p1", "p2") and t is not None]
-            peer = min(peers) if peers else None
+            fastest = {}
+            for name, group in (("CAD", CAD_PEERS), ("STL", tuple(m for m in PEERS if m not in CAD_PEERS))):
+                found = [times[m] for m in group if times[m] is not None]
+                if found:
+                    fastest[name] = min(found)
             cells = []
             for m in LABELS:
                 t = times[m]
                 if t is None:
                     cells.append("not reached" if any(r["method"] == m for r in mine) else "-")
-                elif m in ("p1", "p2") or peer is None:
+                elif m in PEERS or not fastest:
                     cells.append(f"{t:.2f} s")
                 else:
-                    cells.append(f"{t:.2f} s ({t / peer:.2g}x)")
+                    cells.append(f"{t:.2f} s (" + ", ".join(f"{t / v:.2g}x {n}" for n, v in fastest.items()) + ")")
             lines.append(f"| {prob} | {target:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -209,7 +222,7 @@ def plot(rows: list[dict], path: Path) -> None:
     for ax, prob in zip(axes[0], problems):
         for i, (m, label) in enumerate(LABELS.items()):
             mine = [r for r in rows if r["problem"] == prob and r["method"] == m and "failed" not in r]
-            marker, colour = "o" if m in ("p1", "p2") else "s", f"C{i}"
+            marker, colour = "o" if m in PEERS else "s", f"C{i}"
             for clock, style, name in (("seconds", "-", label), ("seconds_cold", ":", None)):
                 pts = [(r[clock], r["error_u"]) for r in sorted(mine, key=lambda r: -r["h"])]  # coarse to fine
                 if pts:
@@ -275,7 +288,8 @@ def main(argv: list[str] | None = None) -> int:
          "repeats": repeats, "medians": rows, "runs": runs}, indent=1, default=float))
     plot(rows, a.out / "accuracy.png")
     text = (f"Displacement (relative L2 at the probes), time to reach the error, warm (a job in a process "
-            f"that has run one before: a service worker); in brackets: over the faster peer's time.\n\n"
+            f"that has run one before: a service worker); in brackets: over the faster peer's time on the CAD "
+            f"geometry, and on the STL where run.\n\n"
             f"{table(rows)}\n\nThe same, cold (the first job in a fresh process: one CLI run):\n\n"
             f"{table(rows, clock='seconds_cold')}\n\nVon Mises stress (relative L2 at the probes), warm:\n\n"
             f"{table(rows, 'error_vm')}\n")

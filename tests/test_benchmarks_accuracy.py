@@ -35,6 +35,10 @@ def test_table_gives_each_method_over_the_faster_peer():
             _run("p2", 0.4, 1e-1, 0.1, 0.1), _run("p2", 0.2, 1e-2, 4.0, 4.0)]
     line = next(l for l in table(rows).splitlines() if l.startswith("| lame | 0.01 |"))
     # staggered 10 s; peers P1 sqrt(0.5 * 5) = 1.58 s, P2 4 s: the faster is P1
-    assert "10.00 s (6.3x)" in line and "1.58 s" in line and "4.00 s" in line
+    assert "10.00 s (6.3x CAD)" in line and "1.58 s" in line and "4.00 s" in line
     cold = next(l for l in table(rows, clock="seconds_cold").splitlines() if l.startswith("| lame | 0.01 |"))
-    assert "28.28 s (18x)" in cold
+    assert "28.28 s (18x CAD)" in cold
+    # a peer meshing the STL: its own ratio beside the CAD one (P2 on the STL 20 s at 1e-2: 0.5x)
+    rows += [_run("p2-stl", 0.4, 1e-1, 2.0, 2.0), _run("p2-stl", 0.2, 1e-3, 200.0, 200.0)]
+    line = next(l for l in table(rows).splitlines() if l.startswith("| lame | 0.01 |"))
+    assert "10.00 s (6.3x CAD, 0.5x STL)" in line and "20.00 s" in line
