@@ -77,7 +77,11 @@ def pcg(
     if bnorm == 0.0:
         space.copy(space.zeros(), x)
         return SolveStats(0, 0.0)
-    r, z, p, q = space.zeros(), space.zeros(), space.zeros(), space.zeros()
+    r, p, q = space.zeros(), space.zeros(), space.zeros()
+    # z (the preconditioned residual) shares q's storage: z is read only until p is updated, q only
+    # from A p until r is, so their lives never overlap; one full vector less (10 bytes per unknown
+    # on the staggered 256^3 shell)
+    z = q
 
     def true_residual() -> float:
         """r = b - A x; returns ||r|| / ||b||."""
