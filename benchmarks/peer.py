@@ -501,8 +501,8 @@ def run_peer(problem_name: str, order: int, h: float, rtol: float = 1e-10, geome
 
     geometry: "straight" simplices, or "curved" (order 2 only): gmsh second-order nodes and
     isoparametric P2, both of the true geometry; or "stl": fTetWild's tetrahedra of the STL voxelastic
-    reads (3D; meshing time counted like gmsh's). outside: "error" raises :class:`ProbeOutsideMesh` if a probe is in no element,
-    "nearest" extrapolates from the closest one.
+    reads (3D; meshing time counted like gmsh's). outside: "error" raises :class:`ProbeOutsideMesh` if a
+    probe is in no element, "nearest" extrapolates from the closest one.
     """
     if order not in (1, 2):
         raise ValueError(f"order: 1 or 2, got {order!r}")

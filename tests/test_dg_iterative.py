@@ -4,9 +4,10 @@
 
 The two solve the same matrix, so to a tight rtol they must give the same coefficients: clamped and
 free (rigid modes bordered out), k = 1 (coarse space: constants) and k = 2 (coarse: k = 1, and below
-it the constants when that level is large), statics and a backward-Euler step, and a penalty too small to be positive definite (CG finds the negative
-curvature and the penalty doubles as it does on a failed Cholesky). Its speed at scale is measured in
-``benchmarks.dg`` (docs/benchmarks.md, "DG at scale").
+it the constants when that level is large), statics and a backward-Euler step, and a penalty too
+small to be positive definite (CG finds the negative curvature and the penalty doubles as it does on
+a failed Cholesky). Its speed at scale is measured in ``benchmarks.dg`` (docs/benchmarks.md, "DG at
+scale").
 """
 
 import numpy as np
@@ -32,7 +33,8 @@ def bar(h: float, **kw) -> DGElasticity:
     cut = slice_cells(s, Grid(origin=(-h, -h, -h), spacing=h, shape=tuple(int(v) for v in n)))
     root = 0.37 * h
     return DGElasticity(cut=cut, surface=s, material=MAT, flux="ip", body_force=np.array([0.0, 0.0, -1e-3]),
-                        prescribed=[Prescribed(box_region([root - 1, -1, -1], [root + 1e-9, 2, 2]), (0, 0, 0), "clamp")],
+                        prescribed=[Prescribed(box_region([root - 1, -1, -1], [root + 1e-9, 2, 2]), (0, 0, 0),
+                                               "clamp")],
                         rtol=RTOL, **kw)
 
 
@@ -61,7 +63,8 @@ def free_sphere(degree: int, kind: str) -> DGElasticity:
     s, cut = sphere_cut(6, 1.0, 0.5)
     inner = SurfaceLoad(EVERYWHERE, "inside", pressure=1.0)
     inner.region = type("Inner", (), {"clip": lambda self, f, tolerance=None: (
-        f[np.linalg.norm(f.mean(axis=1), axis=1) < 0.75], np.nonzero(np.linalg.norm(f.mean(axis=1), axis=1) < 0.75)[0])})()
+        f[np.linalg.norm(f.mean(axis=1), axis=1) < 0.75],
+        np.nonzero(np.linalg.norm(f.mean(axis=1), axis=1) < 0.75)[0])})()
     return DGElasticity(cut=cut, surface=s, material=MAT, degree=degree, flux="ip", surface_loads=[inner],
                         solver_kind=kind, rtol=RTOL)
 

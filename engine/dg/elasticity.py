@@ -144,7 +144,8 @@ class DGElasticity(BoundaryTerms, Fields):
 
     @property
     def iterative(self) -> bool:
-        """Whether the system is solved by p-multigrid CG (``solver_kind``; "auto": above DIRECT_LIMIT[degree] unknowns)."""
+        """Whether the system is solved by p-multigrid CG (``solver_kind``; "auto": above
+        DIRECT_LIMIT[degree] unknowns)."""
         return self.solver_kind == "iterative" or (self.solver_kind == "auto" and self.size > DIRECT_LIMIT[self.degree])
 
     def _build(self) -> None:
