@@ -119,9 +119,9 @@ def test_auto_picks_by_size():
 @pytest.mark.parametrize("free", [False, True])
 def test_three_levels_when_the_k1_level_is_large(monkeypatch, free):
     # above COARSE_DIRECT coarse unknowns the k = 1 level is cycled over the constants, not factorised
-    from engine.solvers import pmultigrid
+    from engine.dg import elasticity
 
-    monkeypatch.setattr(pmultigrid, "COARSE_DIRECT", 100)
+    monkeypatch.setattr(elasticity, "COARSE_DIRECT", 100)
     make = (lambda kind: free_sphere(2, kind)) if free else (lambda kind: bar(0.125, degree=2, solver_kind=kind))
     runs = [make(kind) for kind in ("direct", "iterative")]
     assert len(runs[1].solver.top.sizes) == 3, runs[1].solver.backend

@@ -33,7 +33,7 @@ from .boundary_terms import BoundaryTerms
 from .fields import Fields
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .integrals import Basis, make_basis
-from .problem import DIRECT_LIMIT
+from .problem import COARSE_DIRECT, DIRECT_LIMIT
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
@@ -167,7 +167,7 @@ class DGElasticity(BoundaryTerms, Fields):
                 if self.iterative:
                     self.matrix = A
                     self.solver = PMultigrid(A, 3 * self.n, degree_chain(self.degree), modes, rtol=self.rtol,
-                                             max_iterations=self.max_iterations)
+                                             max_iterations=self.max_iterations, coarse_direct=COARSE_DIRECT)
                 else:
                     self.matrix = A = A.tocsr()
                     self.solver = DirectSolver(A, modes)

@@ -18,6 +18,10 @@ if TYPE_CHECKING:
 # 183k; k = 1 1.1 / 1.2 s at 22k, 3.8 / 4.0 s at 73k, 13 / 7.1 s at 171k. Below the limits the factor,
 # reused by every load and time step (0.4 s a solve at 55k against CG's 1.4 s), is the better buy.
 DIRECT_LIMIT = {1: 100_000, 2: 50_000}
+# A p-multigrid coarse level with more unknowns than this is itself cycled, not factorised: the k = 1
+# level's factor fills superlinearly (170,880 unknowns: 15 s, 1.8 GiB; 567,072: ~150 s, ~10 GiB), while
+# cycling it over the constants costs iterations (the 32^3 shell: 24 -> 86, 26.5 -> 38 s, 3.0 -> 1.8 GiB)
+COARSE_DIRECT = 300_000
 
 
 def estimate_memory(grid: Grid, method_spec) -> int:
@@ -26,10 +30,12 @@ def estimate_memory(grid: Grid, method_spec) -> int:
     its size limit). Per cell 7 blocks (element + 6 faces) of (d * basis)^2 doubles; the direct solve
     holds them 4 times over (assembly copies) times the sparse Cholesky factor's fill, which grows like
     the grid's side in 3D (nested dissection); the iterative one holds them twice and factorises only
-    its degree k - 1 coarse level. Measured peaks on the sphere shell (`python -m benchmarks scaling`),
+    its degree k - 1 coarse level, or above COARSE_DIRECT unknowns holds that level twice and
+    factorises the constants below it. Measured peaks on the sphere shell (`python -m benchmarks scaling`),
     direct, grids 18^3 / 26^3 / 34^3: k = 2 1.51 / 5.34 / 14.5 GiB, k = 1 0.48 / 1.11 / 2.60 GiB (this
-    estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1 0.71 GiB (estimate 2.0x, 1.4x: the shell
-    fills 36% of its cells)."""
+    estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1 0.71 GiB (estimate 1.45x, 1.13x), at
+    50^3 k = 2 with three levels 5.80 GiB (estimate 2.5x: the shell fills 38% of its cells, the estimate
+    counts them all)."""
     d, cells, degree = grid.dim, grid.num_cells, method_spec.degree
     size = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
     low = {1: 1, 2: 4}[degree] if d == 3 else {1: 1, 2: 3}[degree]
@@ -38,7 +44,11 @@ def estimate_memory(grid: Grid, method_spec) -> int:
         fill = max(1.0, count ** (1 / d) / 12) if d == 3 else 1.0
         return count * 7 * (d * basis) ** 2 * 8 * 4 * fill
 
-    iterative = cells * 7 * (d * size) ** 2 * 8 * 2 + direct(cells, low)
+    # the k - 1 level factorised (at most COARSE_DIRECT unknowns of it), or cycled over the constants
+    bottom = direct(min(cells, COARSE_DIRECT / (d * low)), low)
+    if degree == 2 and cells * d * low > COARSE_DIRECT:
+        bottom = max(bottom, cells * 7 * (d * low) ** 2 * 8 * 2 + direct(cells, 1))
+    iterative = cells * 7 * (d * size) ** 2 * 8 * 2 + bottom
     kind = getattr(method_spec, "solver", "auto")
     if kind == "direct":
         return int(direct(cells, size))

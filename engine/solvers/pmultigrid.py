@@ -7,7 +7,7 @@ constants). Prolongation is an injection, so each Galerkin coarse matrix P^T A P
 blocks above it. The preconditioner is one symmetric V-cycle: on every level ``SMOOTHING_STEPS``
 damped block-Jacobi steps (each element's own block inverted) before and after the correction
 from the level below; the bottom level (k - 1, or below that the constants once the k - 1 level
-passes COARSE_DIRECT unknowns) is factorised once by sparse Cholesky. Rigid modes a body keeps
+passes the caller's ``coarse_direct`` unknowns) is factorised once by sparse Cholesky. Rigid modes a body keeps
 free are bordered out of the bottom factor and projected out of every preconditioned residual.
 
 Why (docs/benchmarks.md, "DG at scale"): the sparse Cholesky of the full k = 2 system fills
@@ -31,10 +31,6 @@ from .linear import SolveStats
 SMOOTHING_STEPS = 2  # before and after the coarse solve: 28 iterations at 16^3 (1 step: 36, 3: 26, equal time)
 DAMPING = 1.5  # x += DAMPING / lambda_max(D^-1 A) D^-1 r: inside the smoother's stability bound of 2
 POWER_STEPS = 20  # power iteration for lambda_max(D^-1 A); it approaches from below, hence DAMPING < 2
-# A coarse level with more unknowns than this is itself cycled, not factorised: the k = 1 level's factor
-# fills superlinearly (170,880 unknowns: 15 s, 1.8 GiB; 567,072: ~150 s, ~10 GiB), while cycling it over
-# the constants costs iterations (the 32^3 shell: 24 -> 86, 26.5 -> 38 s, 3.0 -> 1.8 GiB)
-COARSE_DIRECT = 300_000
 
 
 class ArraySpace:
@@ -66,10 +62,11 @@ class ArraySpace:
 class Level:
     """One level of the V-cycle: A [n, n] block-sparse with blocks [s, s], its block-Jacobi smoother,
     and below it the Galerkin level of ``chain[0]`` (the coarse unknowns' places within a block):
-    another ``Level`` over ``chain[1:]`` where that level has more than COARSE_DIRECT unknowns and
-    the chain goes on, else its sparse Cholesky (free ``modes`` [n, k] bordered out there)."""
+    another ``Level`` over ``chain[1:]`` where that level has more than ``coarse_direct`` unknowns and
+    the chain goes on (None: never), else its sparse Cholesky (free ``modes`` [n, k] bordered out there)."""
 
-    def __init__(self, A: sp.bsr_matrix, chain: list[np.ndarray], modes: np.ndarray | None) -> None:
+    def __init__(self, A: sp.bsr_matrix, chain: list[np.ndarray], modes: np.ndarray | None,
+                 coarse_direct: int | None = None) -> None:
         self.matrix = A
         self.n = A.shape[0]
         s = A.blocksize[0]
@@ -85,8 +82,8 @@ class Level:
             # coarse matrix's null space: all rigid motions for k = 2 over k = 1, translations over k = 0
             U, sigma, _ = np.linalg.svd(modes[self.coarse], full_matrices=False)
             coarse_modes = U[:, sigma > 1 - 1e-8] if np.any(sigma > 1 - 1e-8) else None
-        if len(chain) > 1 and coarse.shape[0] > COARSE_DIRECT:
-            self.below: Level | DirectSolver = Level(coarse, chain[1:], coarse_modes)
+        if len(chain) > 1 and coarse_direct is not None and coarse.shape[0] > coarse_direct:
+            self.below: Level | DirectSolver = Level(coarse, chain[1:], coarse_modes, coarse_direct)
         else:
             self.below = DirectSolver(coarse.tocsr(), coarse_modes)
 
@@ -137,7 +134,9 @@ class PMultigrid:
 
     chain: per level below the fine one, the coarse unknowns' places within a block of the level
     above (the same in every block): for DG k = 2, the k = 1 functions among the 30, then the
-    constants among those 12. modes Q [n, k] (orthonormal columns): rigid motions no boundary holds;
+    constants among those 12; a level below the first with more than ``coarse_direct`` unknowns is
+    cycled in turn instead of factorised (None: the first coarse level is factorised). modes Q [n, k]
+    (orthonormal columns): rigid motions no boundary holds;
     A need be positive definite only on their complement, b is taken without its part along them and
     the solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a
     diagonal block or the bottom matrix is not (then A is not either); CG raises ``SolverError`` with
@@ -145,14 +144,14 @@ class PMultigrid:
     """
 
     def __init__(self, A: sp.spmatrix, block: int, chain: list[np.ndarray], modes: np.ndarray | None = None, *,
-                 rtol: float = 1e-8, max_iterations: int = 5000) -> None:
+                 rtol: float = 1e-8, max_iterations: int = 5000, coarse_direct: int | None = None) -> None:
         t0 = time.perf_counter()
         self.matrix = A if sp.isspmatrix_bsr(A) and A.blocksize == (block, block) else sp.bsr_matrix(
             A, blocksize=(block, block))
         self.matrix.sort_indices()
         self.n = A.shape[0]
         self.modes = modes if modes is not None and modes.shape[1] else None
-        self.top = Level(self.matrix, chain, self.modes)
+        self.top = Level(self.matrix, chain, self.modes, coarse_direct)
         self._pcg = PCG(ArraySpace(self.n), self._apply, self._precondition, rtol, max_iterations)
         self.setup_seconds = time.perf_counter() - t0
 
