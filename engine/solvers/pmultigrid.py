@@ -136,9 +136,8 @@ class PMultigrid:
     above (the same in every block): for DG k = 2, the k = 1 functions among the 30, then the
     constants among those 12; a level below the first with more than ``coarse_direct`` unknowns is
     cycled in turn instead of factorised (None: the first coarse level is factorised). modes Q [n, k]
-    (orthonormal columns): rigid motions no boundary holds;
-    A need be positive definite only on their complement, b is taken without its part along them and
-    the solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a
+    (orthonormal columns): rigid motions no boundary holds; A need be positive definite only on their
+    complement, b is taken without its part along them and the solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a
     diagonal block or the bottom matrix is not (then A is not either); CG raises ``SolverError`` with
     reason "indefinite" when it meets a direction of non-positive curvature.
     """
