@@ -165,7 +165,8 @@ class DGMethod(SpecModel):
     solver: Literal["auto", "direct", "iterative"] = Field(
         "auto", description="Linear solver: 'direct' sparse Cholesky (its memory grows superlinearly), 'iterative' CG "
                             "preconditioned by p-multigrid onto degree k-1 (to solver.rtol), 'auto' iterative above "
-                            "100,000 unknowns for k=1 and 50,000 for k=2.")
+                            "100,000 unknowns for k=1 and 50,000 for k=2 (400,000 / 200,000 when lambda/mu > 100, "
+                            "nu > 0.495, where CG needs many more iterations).")
 
 
 Method = Annotated[

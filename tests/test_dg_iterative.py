@@ -18,6 +18,7 @@ from engine.boundary import Prescribed, SurfaceLoad
 from engine.dg.elasticity import DGElasticity
 from engine.geometry.slicing import slice_cells
 from engine.grid import Grid
+from engine.material import Material
 from tests.conftest import surface_of
 from tests.test_dg import EVERYWHERE, MAT, box_region, sphere_cut
 
@@ -32,7 +33,8 @@ def bar(h: float, **kw) -> DGElasticity:
     n = np.ceil((np.array([2.0, 0.5, 0.5]) + 2 * h) / h).astype(int) + 1
     cut = slice_cells(s, Grid(origin=(-h, -h, -h), spacing=h, shape=tuple(int(v) for v in n)))
     root = 0.37 * h
-    return DGElasticity(cut=cut, surface=s, material=MAT, flux="ip", body_force=np.array([0.0, 0.0, -1e-3]),
+    kw.setdefault("material", MAT)
+    return DGElasticity(cut=cut, surface=s, flux="ip", body_force=np.array([0.0, 0.0, -1e-3]),
                         prescribed=[Prescribed(box_region([root - 1, -1, -1], [root + 1e-9, 2, 2]), (0, 0, 0),
                                                "clamp")],
                         rtol=RTOL, **kw)
@@ -112,6 +114,9 @@ def test_auto_picks_by_size():
     try:
         elasticity.DIRECT_LIMIT[1] = m.size - 1
         assert bar(0.25, degree=1).solver.backend.startswith("pmg-cg")
+        # nearly incompressible: Cholesky up to the larger limit (CG's iterations grow like sqrt(lambda / mu))
+        soft = Material(1.0, 0.4999)
+        assert bar(0.25, degree=1, material=soft).solver.backend == "pardiso"
     finally:
         elasticity.DIRECT_LIMIT.update(elasticity_limit)
 

@@ -33,7 +33,7 @@ from .boundary_terms import BoundaryTerms
 from .fields import Fields
 from .elements import MERGE_FRACTION, Elements, make_elements
 from .integrals import Basis, make_basis
-from .problem import COARSE_DIRECT, DIRECT_LIMIT
+from .problem import COARSE_DIRECT, DIRECT_LIMIT, DIRECT_LIMIT_INCOMPRESSIBLE, INCOMPRESSIBLE_RATIO
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
@@ -145,8 +145,12 @@ class DGElasticity(BoundaryTerms, Fields):
     @property
     def iterative(self) -> bool:
         """Whether the system is solved by p-multigrid CG (``solver_kind``; "auto": above
-        DIRECT_LIMIT[degree] unknowns)."""
-        return self.solver_kind == "iterative" or (self.solver_kind == "auto" and self.size > DIRECT_LIMIT[self.degree])
+        DIRECT_LIMIT[degree] unknowns, or DIRECT_LIMIT_INCOMPRESSIBLE[degree] when lambda / mu exceeds
+        INCOMPRESSIBLE_RATIO)."""
+        if self.solver_kind != "auto":
+            return self.solver_kind == "iterative"
+        limits = DIRECT_LIMIT_INCOMPRESSIBLE if self.lam > INCOMPRESSIBLE_RATIO * self.mu else DIRECT_LIMIT
+        return self.size > limits[self.degree]
 
     def _build(self) -> None:
         """Assemble and set up the solver; double eta until an IP matrix is positive definite."""

@@ -18,6 +18,12 @@ if TYPE_CHECKING:
 # 183k; k = 1 1.1 / 1.2 s at 22k, 3.8 / 4.0 s at 73k, 13 / 7.1 s at 171k. Below the limits the factor,
 # reused by every load and time step (0.4 s a solve at 55k against CG's 1.4 s), is the better buy.
 DIRECT_LIMIT = {1: 100_000, 2: 50_000}
+# Near incompressibility the block-Jacobi smoother misses the divergence-free modes that span elements, and
+# CG's iterations grow like sqrt(lambda / mu): the 16^3 k = 2 shell took 23 / 68 / 929 iterations at
+# nu 0.3 / 0.49 / 0.4999 (3.1 / 4.7 / 48.5 s, Cholesky 4.7 / 4.4 / 6.0 s). Above INCOMPRESSIBLE_RATIO
+# "auto" keeps Cholesky up to DIRECT_LIMIT_INCOMPRESSIBLE unknowns (its memory: 5 GiB at 183k for k = 2).
+INCOMPRESSIBLE_RATIO = 100.0  # lambda / mu, nu ~ 0.495
+DIRECT_LIMIT_INCOMPRESSIBLE = {1: 400_000, 2: 200_000}
 # A p-multigrid coarse level with more unknowns than this is itself cycled, not factorised: the k = 1
 # level's factor fills superlinearly (170,880 unknowns: 15 s, 1.8 GiB; 567,072: ~150 s, ~10 GiB), while
 # cycling it over the constants costs iterations (the 32^3 shell: 24 -> 86, 26.5 -> 38 s, 3.0 -> 1.8 GiB)
@@ -27,7 +33,7 @@ COARSE_DIRECT = 300_000
 def estimate_memory(grid: Grid, method_spec) -> int:
     """Upper estimate of a job's peak memory [bytes] from the grid alone, for the solver the job will
     use (``method.solver``; "auto" can be either, so the larger of the two, the direct one at most at
-    its size limit). Per cell 7 blocks (element + 6 faces) of (d * basis)^2 doubles; the direct solve
+    its size limit for a nearly incompressible material). Per cell 7 blocks (element + 6 faces) of (d * basis)^2 doubles; the direct solve
     holds them 4 times over (assembly copies) times the sparse Cholesky factor's fill, which grows like
     the grid's side in 3D (nested dissection); the iterative one holds them twice and factorises only
     its degree k - 1 coarse level, or above COARSE_DIRECT unknowns holds that level twice and
@@ -54,7 +60,9 @@ def estimate_memory(grid: Grid, method_spec) -> int:
         return int(direct(cells, size))
     if kind == "iterative":
         return int(iterative)
-    return int(max(iterative, direct(min(cells, DIRECT_LIMIT[degree] / (d * size)), size)))
+    # the material is not known here: the direct solve at the larger of its limits
+    limit = max(DIRECT_LIMIT[degree], DIRECT_LIMIT_INCOMPRESSIBLE[degree])
+    return int(max(iterative, direct(min(cells, limit / (d * size)), size)))
 
 
 def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity:
