@@ -1,7 +1,7 @@
 """DG method floor: a sphere shell on a 16^3 grid, k = 2, static; stages and assembly throughput.
 
     .venv/bin/python -m benchmarks.dg [--resolution 16] [--degree 2] [--repeats 3] [--json out.json]
-                                      [--solver auto|direct|iterative]
+                                      [--solver auto|direct|iterative] [--nu 0.3]
     .venv/bin/python -m benchmarks.dg --solvers [--resolution 16] [--degree 2]
 
 ``--solvers`` builds the same system once and times its linear solvers side by side, each in its
@@ -10,7 +10,7 @@ SparseSolver LLT, pyamg smoothed-aggregation CG (rtol 1e-10, rigid modes as near
 engine's p-multigrid CG (rtol 1e-10; the iterative one), or those named by ``--which``.
 
 Shell: icospheres (subdivisions 5) of radius 1 and 0.6, clamped below z = -0.8, gravity,
-E = 1e6, nu = 0.3, IP, penalty 10. Each repeat runs in its own spawned process (cold geometry
+E = 1e6, nu = 0.3 (``--nu``), IP, penalty 10. Each repeat runs in its own spawned process (cold geometry
 cache, warm Taichi kernel cache after the first); medians over repeats.
 """
 
@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 
-def _shell_method(resolution: int, degree: int, solver: str = "auto"):
+def _shell_method(resolution: int, degree: int, solver: str = "auto", nu: float = 0.3):
     """(DGElasticity, slicing seconds, discretization seconds) of the benchmark shell."""
     import numpy as np
     import trimesh
@@ -50,14 +50,14 @@ def _shell_method(resolution: int, degree: int, solver: str = "auto"):
     cut = slice_cells(surface, grid)
     t1 = time.perf_counter()
     clamp = Halfspaces(np.array([[0, 0, 1.0]]), np.array([-0.8]))
-    m = DGElasticity(cut=cut, surface=surface, material=Material(1e6, 0.3, 1000), degree=degree, flux="ip",
+    m = DGElasticity(cut=cut, surface=surface, material=Material(1e6, nu, 1000), degree=degree, flux="ip",
                      penalty=10, prescribed=[Prescribed(clamp, (0, 0, 0), "base")],
                      body_force=np.array([0, 0, -9.81e3]), solver_kind=solver)
     return m, t1 - t0, time.perf_counter() - t1
 
 
-def _run(resolution: int, degree: int, solver: str, queue) -> None:
-    m, slicing, discretization = _shell_method(resolution, degree, solver)
+def _run(resolution: int, degree: int, solver: str, nu: float, queue) -> None:
+    m, slicing, discretization = _shell_method(resolution, degree, solver, nu)
     t = time.perf_counter()
     st = m.solve()
     solve = time.perf_counter() - t
@@ -156,6 +156,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path)
     ap.add_argument("--solvers", action="store_true", help="time the linear solvers side by side")
+    ap.add_argument("--nu", type=float, default=0.3, help="Poisson's ratio of the whole-job runs")
     ap.add_argument("--which", nargs="+", default=["pardiso", "superlu", "taichi-llt", "pyamg-cg", "pmg-cg"],
                     help="the solvers --solvers times")
     ap.add_argument("--solver", choices=("auto", "direct", "iterative"), default="auto",
@@ -177,7 +178,7 @@ def main() -> None:
     runs = []
     for _ in range(a.repeats):
         q = ctx.Queue()
-        p = ctx.Process(target=_run, args=(a.resolution, a.degree, a.solver, q))
+        p = ctx.Process(target=_run, args=(a.resolution, a.degree, a.solver, a.nu, q))
         p.start()
         runs.append(q.get())
         p.join()

@@ -153,7 +153,7 @@ def _stl_mesh(prob: Problem, h: float) -> _GmshMesh:
 
     if prob.dim != 3:
         raise ValueError(f"geometry 'stl': a 3D problem, got {prob.name!r}")
-    mesh = prob.job({"kind": "staggered"}, h)[1]
+    mesh = prob.surface_mesh()
     points, tets = pytetwild.tetrahedralize(np.asarray(mesh.vertices, dtype=np.float64),
                                             np.asarray(mesh.faces, dtype=np.int32), edge_length_abs=h)
     return _GmshMesh(np.asarray(points, dtype=np.float64), np.asarray(tets, dtype=np.int64))

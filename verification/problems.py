@@ -61,6 +61,10 @@ class Problem:
         """Exact von Mises stress [N] [Pa] at x (3D; 2D plane strain with sigma_zz = lambda tr eps)."""
         return von_mises_of(self.stress(x), self.lame[0] / (2 * (self.lame[0] + self.lame[1])))
 
+    def surface_mesh(self):
+        """The triangles voxelastic reads for this problem (trimesh; None for the 2D annulus's polygons)."""
+        return {"lame": _shell, "ball": _ball_mesh}.get(self.name, lambda: None)()
+
     def job(self, method: dict, cell_size: float) -> tuple[dict, object, object]:
         """(spec dict, mesh (trimesh or None), engine.pipeline.Functions) for a voxelastic run."""
         from engine.pipeline import Functions
@@ -75,7 +79,7 @@ class Problem:
             spec = {**base, "geometry": {"mesh": "shell.stl"},
                     "boundaries": [{"kind": "pressure", "name": "inner", "value": self.pressure,
                                     "region": {"sphere": {"center": [0, 0, 0], "radius": 0.5 * (a + b)}}}]}
-            return spec, _shell(), Functions()
+            return spec, self.surface_mesh(), Functions()
         if self.name == "annulus":
             inner, outer = self.radii
             middle = 0.5 * (inner + outer)
@@ -93,7 +97,7 @@ class Problem:
                      "region": {"halfspace": {"point": [0, 0, BALL_CAP], "normal": [0, 0, 1]}}},
                     {"kind": "traction", "name": "rest", "value": [0, 0, 0],
                      "region": {"halfspace": {"point": [0, 0, BALL_CAP], "normal": [0, 0, -1]}}}]}
-        return spec, _ball_mesh(), Functions(body_force=self.body_force, displacement={"cap": self.exact},
+        return spec, self.surface_mesh(), Functions(body_force=self.body_force, displacement={"cap": self.exact},
                                              stress={"rest": self.stress})
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ..solvers.pmultigrid import diagonal_blocks
 from . import kernels
 from .elements import Elements
 from .integrals import Basis, PatchProjection, element_gradients, face_products, patch_products
@@ -152,6 +153,4 @@ def to_matrix(groups: list[Group], count: int) -> sp.bsr_matrix:
 
 def add_to_diagonal(A: sp.bsr_matrix, value: float) -> None:
     """A += value I in place (A from :func:`to_matrix`: every diagonal block stored)."""
-    rows = np.repeat(np.arange(len(A.indptr) - 1), np.diff(A.indptr))
-    diagonal = np.nonzero(A.indices == rows)[0]
-    A.data[diagonal] += value * np.eye(A.blocksize[0])
+    A.data[diagonal_blocks(A)] += value * np.eye(A.blocksize[0])

@@ -19,8 +19,8 @@ if TYPE_CHECKING:
 # reused by every load and time step (0.4 s a solve at 55k against CG's 1.4 s), is the better buy.
 DIRECT_LIMIT = {1: 100_000, 2: 50_000}
 # Near incompressibility the block-Jacobi smoother misses the divergence-free modes that span elements, and
-# CG's iterations grow like sqrt(lambda / mu): the 16^3 k = 2 shell took 23 / 68 / 929 iterations at
-# nu 0.3 / 0.49 / 0.4999 (3.1 / 4.7 / 48.5 s, Cholesky 4.7 / 4.4 / 6.0 s). Above INCOMPRESSIBLE_RATIO
+# CG's iterations grow like sqrt(lambda / mu): the 16^3 k = 2 shell took 23 / 68 / 949 iterations at
+# nu 0.3 / 0.49 / 0.4999 (4.2 / 6.3 / 50.2 s, Cholesky 7.4 / 5.9 / 7.7 s; `benchmarks.dg --nu`). Above INCOMPRESSIBLE_RATIO
 # "auto" keeps Cholesky up to DIRECT_LIMIT_INCOMPRESSIBLE unknowns (its memory: 5 GiB at 183k for k = 2).
 INCOMPRESSIBLE_RATIO = 100.0  # lambda / mu, nu ~ 0.495
 DIRECT_LIMIT_INCOMPRESSIBLE = {1: 400_000, 2: 200_000}
@@ -33,15 +33,16 @@ COARSE_DIRECT = 300_000
 def estimate_memory(grid: Grid, method_spec) -> int:
     """Upper estimate of a job's peak memory [bytes] from the grid alone, for the solver the job will
     use (``method.solver``; "auto" can be either, so the larger of the two, the direct one at most at
-    its size limit for a nearly incompressible material). Per cell 7 blocks (element + 6 faces) of (d * basis)^2 doubles; the direct solve
-    holds them 4 times over (assembly copies) times the sparse Cholesky factor's fill, which grows like
-    the grid's side in 3D (nested dissection); the iterative one holds them twice and factorises only
-    its degree k - 1 coarse level, or above COARSE_DIRECT unknowns holds that level twice and
-    factorises the constants below it. Measured peaks on the sphere shell (`python -m benchmarks scaling`),
-    direct, grids 18^3 / 26^3 / 34^3: k = 2 1.51 / 5.34 / 14.5 GiB, k = 1 0.48 / 1.11 / 2.60 GiB (this
-    estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1 0.71 GiB (estimate 1.45x, 1.13x), at
-    50^3 k = 2 with three levels 5.80 GiB (estimate 2.5x: the shell fills 38% of its cells, the estimate
-    counts them all)."""
+    its size limit for a nearly incompressible material). Per cell 7 blocks (element + 6 faces) of (d *
+    basis)^2 doubles; the direct solve holds them 4 times over (assembly copies) times the sparse
+    Cholesky factor's fill, which grows like the grid's side in 3D (nested dissection); the iterative
+    one holds them twice and factorises only its degree k - 1 coarse level, or above COARSE_DIRECT
+    unknowns holds that level twice and factorises the constants below it. Measured peaks on the sphere
+    shell (`python -m benchmarks scaling`), direct, grids 18^3 / 26^3 / 34^3: k = 2 1.51 / 5.34 / 14.5
+    GiB, k = 1 0.48 / 1.11 / 2.60 GiB (this estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1
+    0.71 GiB (estimate for "auto" 1.45x, and 3.8x for k = 1, which must cover a Cholesky of 400k
+    unknowns should the material be nearly incompressible), at 50^3 k = 2 with three levels 5.80 GiB
+    (estimate 2.5x: the shell fills 38% of its cells, the estimate counts them all)."""
     d, cells, degree = grid.dim, grid.num_cells, method_spec.degree
     size = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
     low = {1: 1, 2: 4}[degree] if d == 3 else {1: 1, 2: 3}[degree]
@@ -55,7 +56,7 @@ def estimate_memory(grid: Grid, method_spec) -> int:
     if degree == 2 and cells * d * low > COARSE_DIRECT:
         bottom = max(bottom, cells * 7 * (d * low) ** 2 * 8 * 2 + direct(cells, 1))
     iterative = cells * 7 * (d * size) ** 2 * 8 * 2 + bottom
-    kind = getattr(method_spec, "solver", "auto")
+    kind = method_spec.solver
     if kind == "direct":
         return int(direct(cells, size))
     if kind == "iterative":

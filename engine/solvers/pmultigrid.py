@@ -132,14 +132,15 @@ class PMultigrid:
     """A :class:`~engine.solvers.linear.LinearSolver` for A [n, n] (symmetric, block sparse with
     blocks [s, s]) by CG preconditioned with the p-multigrid V-cycle above.
 
-    chain: per level below the fine one, the coarse unknowns' places within a block of the level
-    above (the same in every block): for DG k = 2, the k = 1 functions among the 30, then the
-    constants among those 12; a level below the first with more than ``coarse_direct`` unknowns is
-    cycled in turn instead of factorised (None: the first coarse level is factorised). modes Q [n, k]
-    (orthonormal columns): rigid motions no boundary holds; A need be positive definite only on their
-    complement, b is taken without its part along them and the solution is orthogonal to them. Raises ``NotPositiveDefinite`` at construction when a
-    diagonal block or the bottom matrix is not (then A is not either); CG raises ``SolverError`` with
-    reason "indefinite" when it meets a direction of non-positive curvature.
+    chain: per level below the fine one, the coarse unknowns' places within a block of the level above
+    (the same in every block): for DG k = 2, the k = 1 functions among the 30, then the constants among
+    those 12; a level below the first with more than ``coarse_direct`` unknowns is cycled in turn
+    instead of factorised (None: the first coarse level is factorised). modes Q [n, k] (orthonormal
+    columns): rigid motions no boundary holds; A need be positive definite only on their complement, b
+    is taken without its part along them and the solution is orthogonal to them. Raises
+    ``NotPositiveDefinite`` at construction when a diagonal block or the bottom matrix is not (then A is
+    not either); CG raises ``SolverError`` with reason "indefinite" when it meets a direction of
+    non-positive curvature.
     """
 
     def __init__(self, A: sp.spmatrix, block: int, chain: list[np.ndarray], modes: np.ndarray | None = None, *,
@@ -187,12 +188,17 @@ class PMultigrid:
         self.top.free()
 
 
+def diagonal_blocks(A: sp.bsr_matrix) -> np.ndarray:
+    """Places [<= E] in A.data of the stored diagonal blocks of a block-sparse A, in row order."""
+    rows = np.repeat(np.arange(len(A.indptr) - 1), np.diff(A.indptr))
+    return np.nonzero(A.indices == rows)[0]
+
+
 def _diagonal_inverses(A: sp.bsr_matrix) -> np.ndarray:
     """Inverses [E, s, s] of the diagonal blocks of a block-sparse A; raises ``NotPositiveDefinite``
     when one is not positive definite (then A is not)."""
     E = A.shape[0] // A.blocksize[0]
-    rows = np.repeat(np.arange(E), np.diff(A.indptr))
-    diagonal = np.nonzero(A.indices == rows)[0]
+    diagonal = diagonal_blocks(A)
     if len(diagonal) != E:
         raise NotPositiveDefinite(f"{E - len(diagonal)} element(s) have no diagonal block")
     blocks = A.data[diagonal]
