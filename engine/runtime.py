@@ -131,7 +131,7 @@ def ensure_initialized() -> RuntimeInfo:
 # The methods hold their device data in Taichi ndarrays made here, so a switch of Taichi build
 # touches this module and the kernel modules only.
 
-_TYPES = {np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32}
+_TYPES = {np.float64: ti.f64, np.float32: ti.f32, np.int32: ti.i32, np.int8: ti.i8}
 
 
 def solve_float() -> type:
@@ -142,6 +142,17 @@ def solve_float() -> type:
 def device_zeros(shape: tuple[int, ...], dtype: type | None = None):
     """A zero Taichi ndarray of ``shape`` in numpy type ``dtype`` (default the solve precision's)."""
     return ti.ndarray(dtype=_TYPES[np.dtype(dtype or solve_float()).type], shape=tuple(shape))
+
+
+def kernel_input(values: np.ndarray, dtype: type | None = None):
+    """``values`` for kernels that only read them, kept beside a host array that stays: on the CPU
+    backend the host array itself when it already has the type (Taichi kernels read numpy arrays
+    in place there, so a device copy would only double the memory), else :func:`device_array`."""
+    values = np.asarray(values)
+    wanted = np.dtype(dtype or (solve_float() if values.dtype.kind in "fb" else values.dtype))
+    if ensure_initialized().arch == "cpu" and values.dtype == wanted and values.flags.c_contiguous:
+        return values
+    return device_array(values, wanted.type)
 
 
 def device_array(values: np.ndarray, dtype: type | None = None):

@@ -86,10 +86,9 @@ class StaggeredElasticity(StaggeredFields):
         say("operator", 0.1)
         self.level = level = make_fine_level(fractions, lam, mu, ghosts=ghosts)
         lay = level.layout
-        # [positions, d] global index of every kept position; (a, position) of every active DOF, in
-        # the smallest integer types that hold them (int64 spent 16 bytes per unknown on the pair)
-        self.index = lay.indices().astype(np.int32)
-        comp, pos = np.nonzero(level.active[:, :len(self.index)])
+        # (a, position) of every active DOF, in the smallest integer types that hold them (int64
+        # spent 16 bytes per unknown on the pair); grid indices come from the layout when asked for
+        comp, pos = np.nonzero(level.active[:, :lay.count * lay.tile_size])
         self.dof_comp, self.dof_pos = comp.astype(np.int8), pos.astype(np.int32)
         del comp, pos
         points = self.sample_points()
@@ -122,7 +121,7 @@ class StaggeredElasticity(StaggeredFields):
     def sample_points(self) -> np.ndarray:
         """Sample point [DOFs, d] [m] of every active DOF (``dof_comp``, ``dof_pos``): origin + h (I +
         1/2 - e_a / 2), made in place (temporaries of [DOFs, d] cost seconds at 20 M DOFs)."""
-        points = self.index[self.dof_pos].astype(np.float64)
+        points = self.level.layout.index_of(self.dof_pos).astype(np.float64)
         points += 0.5
         points[np.arange(len(self.dof_comp)), self.dof_comp] -= 0.5
         points *= self.grid.spacing
@@ -197,7 +196,7 @@ class StaggeredElasticity(StaggeredFields):
         out = np.zeros((d, level.size))
         near = np.asarray(load.region.contains(points, slack=0.5 * h), dtype=bool)
         a, p = self.dof_comp[near], self.dof_pos[near]
-        out[a, p] = f[(a,) + tuple(self.index[p].T)]
+        out[a, p] = f[(a,) + tuple(self.level.layout.index_of(p).T)]
         return out
 
     def _active_lookup(self, a: int, index: np.ndarray) -> np.ndarray:

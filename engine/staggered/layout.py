@@ -89,6 +89,16 @@ class TileLayout:
         local = np.stack(np.unravel_index(np.arange(self.tile_size), (TILE,) * self.dim), axis=1)
         return (self.coords.astype(np.int64)[:, None, :] * TILE + local[None]).reshape(-1, self.dim)
 
+    def index_of(self, pos: np.ndarray) -> np.ndarray:
+        """Global index [k, d] int32 of the flat positions ``pos`` [k] in kept tiles: that of
+        :meth:`indices` at those rows, without the [size, d] array."""
+        pos = np.asarray(pos)
+        local = np.stack(np.unravel_index(pos % self.tile_size, (TILE,) * self.dim), axis=1).astype(np.int32)
+        out = self.coords.astype(np.int32)[pos // self.tile_size]
+        out *= TILE
+        out += local
+        return out
+
     def load(self, values: BlockSparse) -> np.ndarray:
         """A block-sparse array (8^d tiles on the same tile grid) as a flat array on this layout;
         tiles of ``values`` that are not kept here must be zero (they are dropped)."""

@@ -35,7 +35,7 @@ from ..solvers.cg import SolverError
 from ..solvers.rigid import free_modes
 from . import assembly, kernels, smoother_kernels
 from .nitsche import make_surface_operator
-from .operator import Level, Mechanisms, describe_thin_features, dof_bodies, make_coarse_level, unheld_groups
+from .operator import Level, Mechanisms, Part, describe_thin_features, dof_bodies, make_coarse_level, unheld_groups
 from .curls import CurlSmoother
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
@@ -122,11 +122,11 @@ class Multigrid:
             lv, up = self.levels[k], self.levels[k - 1]
             d = lv.dim
             # the shares P^T(active & ~free) / P^T(active), with the cycle's own restriction
-            # (device arrays: a host-array variant of the kernel would be compiled again)
-            ones, reach, kept = lv.zeros(), lv.zeros(), lv.zeros()
-            kernels.fill(d, ones, 1.0)
+            # (device arrays, the mask as int8 like the levels' own: another variant of the kernel
+            # would be compiled again)
+            ones, reach, kept = device_array(np.ones((d, lv.size), np.int8)), lv.zeros(), lv.zeros()
             kernels.restrict(d, self.kind, lv.coords, self.children[k - 1], ones, device_array(up.active, lv.dtype), reach)
-            kernels.restrict(d, self.kind, lv.coords, self.children[k - 1], ones, up.mask, kept)
+            kernels.restrict(d, self.kind, lv.coords, self.children[k - 1], ones, device_array(up.free, lv.dtype), kept)
             reach = reach.to_numpy().astype(np.float64)
             share = (reach - kept.to_numpy()) / np.maximum(reach, 1e-300)
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
@@ -173,7 +173,7 @@ class Multigrid:
         if first:
             self._chebyshev(k, b, x, lv.dinv, None, SPREAD, DEGREE, first=True)
         if band is not None:
-            self._chebyshev(k, b, x, band[0], band[1], BAND_SPREAD, BAND_DEGREE, first=False)
+            self._chebyshev(k, b, x, lv.dinv, band, BAND_SPREAD, BAND_DEGREE, first=False)
         if not first:
             self._chebyshev(k, b, x, lv.dinv, None, SPREAD, DEGREE, first=False)
 
@@ -228,11 +228,13 @@ def _curl_step(level: Level, smoother: CurlSmoother, y):
     return step
 
 
-def boundary_band(level: Level):
-    """(D^-1 restricted to the band, its ``Part``) for the boundary smoothing of ``level``, or None
-    when no free DOF is within one cell of a cut cell or a prescribed DOF. The part lists the
-    band's positions, not its tiles: the band is a few cells thick, and its tiles (7,386 of
-    17,050 on the 256^3 shell) made each band step cost 75% of a full one."""
+def boundary_band(level: Level) -> Part | None:
+    """The ``Part`` of the boundary smoothing of ``level``, or None when no free DOF is within one
+    cell of a cut cell or a prescribed DOF. The part lists the band's positions, not its tiles: the
+    band is a few cells thick, and its tiles (7,386 of 17,050 on the 256^3 shell) made each band
+    step cost 75% of a full one. Every free DOF at a listed position is in the band, so the band's
+    smoothing reads the level's own D^-1 there (a D^-1 of its own, zero off the band, cost a full
+    vector per level: 10 bytes per unknown on the 256^3 shell)."""
     d, lay = level.dim, level.layout
     vc = level.vc_host
     seeds = lay.dense((((vc > 0) & (vc < 1)) | (level.active & ~level.free).any(axis=0)).astype(np.uint8))
@@ -240,12 +242,10 @@ def boundary_band(level: Level):
     # cost seconds at 256^3)
     for a in range(d):
         seeds = ndi.maximum_filter1d(seeds, 3, axis=a, mode="constant")
-    members = level.free & (lay.flat(seeds) > 0)[None]
+    members = (level.free & (lay.flat(seeds) > 0)[None]).any(axis=0)
     if not members.any():
         return None
-    dinv = level.zeros()
-    kernels.scaled(d, level.dinv, members.astype(level.dtype), 1.0, dinv)
-    return dinv, level.part(np.nonzero(members.any(axis=0))[0])
+    return level.part(np.nonzero(members)[0])
 
 
 def cut_share(level: Level) -> float:

@@ -19,7 +19,7 @@ import scipy.sparse.csgraph as csgraph
 
 from ..geometry.fractions import VolumeFractions
 from ..grid import axis_pairs
-from ..runtime import device_array, device_zeros, solve_float
+from ..runtime import device_array, device_zeros, kernel_input, solve_float
 from . import kernels
 from .ghosts import ghost_faces, ghost_inertia
 from .layout import TILE, TileLayout, dilate, make_layout, reorder
@@ -72,7 +72,8 @@ class Level:
         self.coords, self.tmap = device_array(coords), device_array(tmap)
         self.nbr = device_array(layout.neighbours())
         self._unlisted = device_array(np.zeros(1, dtype=np.int32))  # the position list of a whole-level pass
-        self.vc, self.ve = device_array(vc, self.dtype), device_array(ve, self.dtype)
+        # the kernels' fractions: on the CPU backend in f64 these are the host arrays themselves
+        self.vc, self.ve = kernel_input(vc, self.dtype), kernel_input(ve, self.dtype)
         full = np.ones(layout.count, dtype=bool)
         for v in (vc[None], ve):
             full &= np.all(v.reshape(len(v), -1, ts)[:, : layout.count] == 1.0, axis=(0, 2))
@@ -100,7 +101,7 @@ class Level:
     def set_free(self, free: np.ndarray) -> None:
         """free [d, size] bool: the unknowns (active and not prescribed)."""
         self.free = np.asarray(free, dtype=bool) & self.active
-        self.mask = device_array(self.free, self.dtype)
+        self.mask = device_array(self.free, np.int8)  # 0 / 1: 1 byte, not 8, per DOF
         self._dinv = None
 
     def set_shift(self, shift: float, density: float) -> None:
@@ -127,17 +128,25 @@ class Level:
                       device_array(m.data, np.float64)) for m in (lower, upper)]
         self._z = device_zeros((n + lower.shape[0],), np.float64)
         self._sx = device_zeros((n,), np.float64)
-        self.extra = self.zeros()
         self._surface_count = n
+        self._slots = {None: (None, device_array(np.arange(max(n, 1), dtype=np.int32)), n)}
 
     def _surface_apply(self, x) -> None:
-        """extra = S x at the surface DOFs (the rest of ``extra`` stays zero)."""
+        """_sx = S x at the surface DOFs (their compact order)."""
         comp, pos = self._ids
         (lp, lc, lv), (up, uc, uv) = self._csr
         kernels.gather(x, comp, pos, self._z)
         kernels.csr_apply(lp, lc, lv, self._z, self._z, self._surface_count)
         kernels.csr_apply(up, uc, uv, self._z, self._sx, 0)
-        kernels.scatter(self._sx, comp, pos, self.extra)
+
+    def _surface_slots(self, part: Part | None) -> tuple:
+        """(device int32 list, count) of the surface DOFs at ``part``'s positions (all when None),
+        found once per part."""
+        key = None if part is None else id(part)
+        if key not in self._slots:  # the part is kept beside its slots, so its id stays its own
+            on = np.nonzero(np.isin(self.surface.pos, part.update.to_numpy()))[0].astype(np.int32)
+            self._slots[key] = (part, device_array(on if len(on) else np.zeros(1, np.int32)), len(on))
+        return self._slots[key][1:]
 
     def _mass_or_mask(self):
         return self.mass if self.mass is not None else self.mask
@@ -185,12 +194,16 @@ class Level:
         listed = part is not None
         surface = self.surface is not None
         if surface:
-            self._surface_apply(x)
+            self._surface_apply(x)  # before the divergence: PRECONDITIONED may overwrite x
         kernels.stress_divergence(d, mode, listed, part.update if listed else self._unlisted,
                                   part.m if listed else self.layout.count * self.layout.tile_size,
                                   self.nbr, self.mask, self.sc, self.se, self.spacing ** (d - 1), x,
-                                  self._mass_or_mask(), self.shift, b, dinv, step, c1, c2, y, surface,
-                                  self.extra if surface else self.mask)
+                                  self._mass_or_mask(), self.shift, b, dinv, step, c1, c2, y)
+        if surface:
+            slots, n = self._surface_slots(part)
+            if n:
+                comp, pos = self._ids
+                kernels.surface_add(mode, slots, n, comp, pos, self._sx, self.mask, dinv, c2, step, x, y)
 
     def apply(self, x, y, part: Part | None = None) -> None:
         """y = A x on the free DOFs (x must vanish off them); only at ``part``'s positions when given."""
