@@ -9,12 +9,15 @@ import pytest
 import taichi as ti
 import trimesh
 
+from engine.boundary import Prescribed
 from engine.geometry.fractions import volume_fractions
 from engine.grid import make_grid
+from engine.regions import Halfspaces
 from engine.runtime import init
 from engine.staggered import kernels as kn
 from engine.staggered.multigrid import Multigrid, boundary_band
 from engine.staggered import multigrid
+from engine.staggered.nitsche import hold_patches, make_surface_operator
 from engine.staggered.operator import device_array, dof_bodies, make_coarse_level, make_fine_level
 from tests.conftest import polygon_surface_2d, surface_of
 
@@ -27,13 +30,18 @@ def runtime():
 
 
 @functools.lru_cache
-def fractions(d):
+def shape(d):
+    """(surface, its volume fractions): an ellipse in 2D, a sphere in 3D."""
     if d == 2:
         th = np.linspace(0, 2 * np.pi, 200, endpoint=False)
         surf = polygon_surface_2d(np.stack([np.cos(th), 0.7 * np.sin(th)], axis=1))
-        return volume_fractions(surf, make_grid(*surf.bounds, resolution=40))
+        return surf, volume_fractions(surf, make_grid(*surf.bounds, resolution=40))
     surf = surface_of(trimesh.creation.icosphere(3, radius=1.0))
-    return volume_fractions(surf, make_grid(*surf.bounds, resolution=18))
+    return surf, volume_fractions(surf, make_grid(*surf.bounds, resolution=18))
+
+
+def fractions(d):
+    return shape(d)[1]
 
 
 def kept(lev, v):
@@ -122,6 +130,57 @@ def test_listed_passes_equal_the_full_ones_at_their_positions(d, rng):
     np.testing.assert_allclose(xs.to_numpy(), want, rtol=0, atol=1e-12 * np.abs(want).max())
 
 
+def held(d):
+    """A level whose surface below x_{d-1} = -0.4 is held by the Nitsche terms (every DOF free)."""
+    surf, fr = shape(d)
+    lev = make_fine_level(fr, LAM, MU)
+    base = Prescribed(Halfspaces(np.eye(d)[d - 1 : d], np.array([-0.4])), (0.0,) * d, "base")
+    patches = hold_patches([base], surf)
+    lev.set_surface(make_surface_operator(lev, patches.quadrature(2 * lev.spacing)), patches)
+    return lev
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_every_mode_adds_the_surface_terms_at_their_dofs(d, rng):
+    """With a hold, each mode of the divergence pass (over all positions and over the band's list)
+    equals the plain operator plus S x = (mass - flux stress - (flux stress)^T) x on the hold's DOFs."""
+    lev = held(d)
+    sf = lev.surface
+    assert len(sf.comp) > 0
+    x = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    b = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    s0 = kept(lev, rng.standard_normal((d, lev.size)) * lev.free)
+    sx = np.zeros((d, lev.size))
+    sx[sf.comp, sf.pos] = sf.matrix() @ x[sf.comp, sf.pos]
+    plain = make_fine_level(fractions(d), LAM, MU)  # the same level without the hold
+    np.testing.assert_array_equal(plain.free, lev.free)
+    ax = plain.zeros()
+    plain.apply(device_array(x), ax)
+    ax = ax.to_numpy() + sx * lev.free
+    assert np.abs(sx).max() > 1e-3 * np.abs(ax).max()  # the hold's terms are not negligible here
+    tol = 1e-12 * (np.abs(ax).max() + np.abs(b).max())
+    y = lev.zeros()
+    lev.apply(device_array(x), y)
+    np.testing.assert_allclose(y.to_numpy(), ax, rtol=0, atol=tol)
+    lev.residual(device_array(x), device_array(b), y)
+    np.testing.assert_allclose(y.to_numpy(), b - ax, rtol=0, atol=tol)
+    dinv = lev.dinv.to_numpy()
+    v = device_array(x)
+    lev.preconditioned(v, v, 0.5)  # in place: S x is taken before x is overwritten
+    np.testing.assert_allclose(v.to_numpy(), 0.5 * dinv * ax, rtol=0, atol=1e-12 * np.abs(dinv * ax).max())
+    part = boundary_band(lev)
+    on = np.zeros(lev.size)
+    on[part.update.to_numpy()] = 1.0
+    assert np.any(on[sf.pos] == 0) and np.any(on[sf.pos] == 1)  # the band holds some of the hold's DOFs
+    for listed, where in ((None, 1.0), (part, on)):
+        xs, step = device_array(x), device_array(s0)
+        lev.chebyshev_step(xs, device_array(b), step, lev.dinv, 0.4, 0.7, listed)
+        want = np.where(where * lev.free > 0, 0.4 * s0 + 0.7 * dinv * (b - ax), s0)
+        np.testing.assert_allclose(step.to_numpy(), want, rtol=0, atol=1e-12 * np.abs(want).max())
+        moved = np.where(where * lev.free > 0, want, 0.0)
+        np.testing.assert_allclose(xs.to_numpy(), x + moved, rtol=0, atol=1e-12 * np.abs(x + moved).max())
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_fused_modes_equal_their_unfused_sums(d, rng):
     lev = clamped(d)
@@ -178,3 +237,16 @@ def test_the_cycle_is_symmetric_with_the_listed_band(rng, monkeypatch):
     v = kept(lev, rng.standard_normal((3, lev.size)) * lev.free)
     w = kept(lev, rng.standard_normal((3, lev.size)) * lev.free)
     assert np.sum(v * cycle(w)) == pytest.approx(np.sum(w * cycle(v)), rel=1e-11)
+
+
+def test_the_cpu_level_keeps_one_copy_of_its_fractions_and_a_byte_mask():
+    """On the CPU backend in f64 the kernels read the host fractions themselves (no device copy
+    beside them: 32 bytes per position) and the free-DOF mask takes one byte per DOF; in f32 the
+    kernels get their own single-precision copy."""
+    lev = make_fine_level(fractions(3), LAM, MU)
+    assert lev.vc is lev.vc_host and lev.ve is lev.ve_host
+    assert lev.mask.dtype == ti.i8
+    np.testing.assert_array_equal(lev.mask.to_numpy(), lev.free)
+    single = make_fine_level(fractions(3), LAM, MU, dtype=np.float32)
+    assert single.vc.dtype == ti.f32 and single.ve.dtype == ti.f32
+    np.testing.assert_array_equal(single.vc.to_numpy(), single.vc_host.astype(np.float32))
