@@ -97,11 +97,18 @@ def _throughput(mesh: str, resolution: int, arch: str, queue) -> None:
 
     apply_s = timed(lambda: level.apply(x, y))
     copy_s = timed(lambda: kernels.copy(grid.dim, x, y))
+    d, pairs = grid.dim, len(level.ve_host)
     positions = level.layout.count * level.layout.tile_size
+    cut = (level.layout.count - level.full_tiles) * level.layout.tile_size
+    # the bytes an apply cannot avoid moving, each array once: x read, the weighted stresses (d + pairs
+    # per position) written and read back, the fractions read in cut tiles only, the int8 mask read,
+    # y written; neighbours' values re-read from cache are not counted
+    moved = 8 * positions * (d + 2 * (d + pairs) + d) + positions * d + 8 * cut * (1 + pairs)
     queue.put({
         "kept_positions": positions, "active_dofs": int(level.active.sum()),
         "apply_s": apply_s, "copy_s": copy_s,
         "copy_GBps": 2 * x.to_numpy().nbytes / copy_s / 1e9,
+        "apply_bytes": moved, "apply_GBps": moved / apply_s / 1e9,
         "apply_positions_per_s": positions / apply_s, "apply_dofs_per_s": int(level.active.sum()) / apply_s,
         "full_tiles": level.full_tiles, "tiles": level.layout.count,
     })
@@ -199,6 +206,7 @@ def main() -> None:
             tp = run_isolated(_throughput, str(shell), args.resolution, args.arch)
             out["throughput"] = tp
             print(f"operator: {tp['apply_s'] * 1e3:.1f} ms per apply, {tp['apply_dofs_per_s'] / 1e6:.1f} M DOF/s, "
+                  f"{tp['apply_bytes'] / 1e9:.2f} GB moved per apply at least ({tp['apply_GBps']:.1f} GB/s), "
                   f"copy {tp['copy_GBps']:.1f} GB/s", flush=True)
             out["shell"] = []
             for nu in args.nu:

@@ -8,6 +8,7 @@ import trimesh
 
 from engine.errors import GeometryError
 from engine.geometry.loading import load_surface, mesh_surface
+from engine.geometry.stitch import stitch_cracks
 from engine.geometry.winding import winding_number
 
 
@@ -65,6 +66,55 @@ def test_big_hole_stays_open_and_says_winding_number():
     assert surface.warnings[0].startswith(f"removed {unused} vertices that no face uses")
     w = winding_number(surface.vertices, surface.faces, np.array([[0.0, 0.0, -0.5], [0.0, 0.0, 3.0]]))
     assert w[0] > 0.9 and abs(w[1]) < 0.1
+
+
+def _cracked(mesh: trimesh.Trimesh, gap: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """mesh as a facet soup whose corners each move by up to ``gap`` per coordinate."""
+    soup = mesh.vertices[mesh.faces].reshape(-1, 3)
+    soup = soup + np.random.default_rng(seed).uniform(-gap, gap, soup.shape)
+    return soup, np.arange(len(soup)).reshape(-1, 3)
+
+
+def test_a_cracked_facet_soup_is_stitched_closed():
+    """An export rounded to 1e-4 m (corners that no exact weld joins): every rim vertex finds its
+    copies, the sphere closes with the icosphere's own vertex and face counts, and its volume moves
+    by no more than the corners did. Before, filling each lone triangle's "hole" cancelled every
+    face and the mesh was refused as enclosing no volume."""
+    sphere = _sphere()
+    surface = load_surface(trimesh.Trimesh(*_cracked(sphere, 1e-4), process=False).export(file_type="stl"),
+                           filename="cracked.stl")
+    assert surface.closed
+    assert (len(surface.vertices), len(surface.faces)) == (len(sphere.vertices), len(sphere.faces))
+    assert len(surface.warnings) == 1 and surface.warnings[0].startswith(
+        f"closed cracks: welded {3 * len(sphere.faces) - len(sphere.vertices)} open-edge vertices"), surface.warnings
+    volume = trimesh.Trimesh(surface.vertices, surface.faces, process=False).volume
+    assert abs(volume / sphere.volume - 1) < 4 * 1e-4 * sphere.area / sphere.volume
+
+
+def test_gaps_as_wide_as_the_edges_and_closed_meshes_are_not_stitched():
+    """A slit as wide as its edges are long is geometry, not a crack; two closed boxes a hair apart
+    have no open edge to stitch; a lone triangle beside a sphere keeps its face (its rim is not a
+    hole to fill)."""
+    a = trimesh.creation.box(extents=[1, 1, 1])
+    b = trimesh.creation.box(extents=[1, 1, 1])
+    b.apply_translation([1 + 1e-7, 0, 0])
+    pair = mesh_surface(*(lambda m: (m.vertices, m.faces))(trimesh.util.concatenate([a, b])))
+    assert len(pair.vertices) == 16 and not any("cracks" in w for w in pair.warnings)
+    # two strips of a sheet, edges 0.4-1.1 long, their facing rims `gap` apart: welded below 0.04
+    for gap, welded in ((0.2, 0), (0.03, 2)):
+        v = np.array([[0, 0, 0], [1, 0, 0], [1, 0.4, 0], [0, 0.4, 0],
+                      [0, 0.4 + gap, 0], [1, 0.4 + gap, 0], [1, 0.8 + gap, 0], [0, 0.8 + gap, 0.0]])
+        f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+        notes: list[str] = []
+        kept, faces = stitch_cracks(v, f, notes)
+        assert len(v) - len(kept) == welded and len(notes) == (welded > 0), notes
+        if welded:
+            np.testing.assert_array_equal(faces[2:], [[3, 2, 4], [3, 4, 5]])
+    sphere = _sphere()
+    lone = np.array([[3.0, 0, 0], [3.5, 0, 0], [3.0, 0.5, 0]])
+    surface = mesh_surface(np.concatenate([sphere.vertices, lone]),
+                           np.concatenate([sphere.faces, len(sphere.vertices) + np.array([[0, 1, 2]])]))
+    assert len(surface.faces) == len(sphere.faces) + 1 and not surface.closed
 
 
 def test_inverted_box_is_turned_outward():

@@ -6,12 +6,14 @@ transforms. The triangles are then validated and repaired (``mesh_surface``):
 
 1. non-finite coordinates, out-of-range indices, no faces -> ``GeometryError``;
 2. exactly coincident vertices are merged (first occurrence keeps its place, so the vertex order
-   is the input's minus the duplicates) and vertices no face uses are dropped;
+   is the input's minus the duplicates), open-edge vertices far closer together than their edges
+   are long are welded (cracks, ``engine.geometry.stitch``) and vertices no face uses are dropped;
 3. faces with a repeated vertex are dropped; repeated faces are reduced to one, and a face
    paired with its reverse (a double-sided internal wall) cancels out, as it does in every
    integral over the surface;
 4. winding is made consistent across each connected shell (majority of the input wins);
-5. triangle and quad holes are filled (``trimesh.repair.fill_holes``);
+5. triangle and quad holes are filled (``trimesh.repair.fill_holes``), except the rims of lone
+   triangles and quads, which are not holes;
 6. each shell is oriented by its nesting: outer shells outward, cavities inward;
 7. zero or negative enclosed volume -> ``GeometryError``;
 8. shells whose solids overlap are replaced by their boolean union (``engine.geometry.shells``).
@@ -46,6 +48,7 @@ from engine.geometry.inflate import DEFAULT_MAX_INFLATED, check_zip_container, c
 from engine.geometry.polygon import polygon_surface, read_drawing
 from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
+from engine.geometry.stitch import stitch_cracks
 from engine.geometry.topology import edge_balance, edges
 from engine.geometry.winding import winding_number
 
@@ -141,6 +144,7 @@ def mesh_surface(
         faces = faces[:, ::-1]
         warnings.append("the transform mirrors the geometry: reversed all faces to keep them outward")
     vertices, faces = _merge_vertices(vertices, faces, warnings if report_merges else [])
+    vertices, faces = stitch_cracks(vertices, faces, warnings)
     faces = _require_faces(_drop_bad_faces(faces, warnings), name)
     vertices, faces = _drop_unused_vertices(vertices, faces, warnings)
     faces = _orient_consistently(faces, len(vertices), warnings)
@@ -455,17 +459,29 @@ def _open_edges(faces: np.ndarray, n_vertices: int) -> tuple[int, int]:
     return int(np.sum(unbalanced & (counts == 1))), int(np.sum(unbalanced & (counts > 1)))
 
 
+# A shell of at most this many faces is not a surface with a hole: filling "the hole" of a lone
+# triangle (or quad) adds its own back face, which then cancels it, so a facet soup whose corners
+# do not weld exactly (an export rounded to 1e-4 m) lost every face and was refused as enclosing no
+# volume. Such shells stay open and the winding number takes them as they are.
+LONE_SHELL = 2
+
+
 def _fill_holes(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) -> np.ndarray:
     if _open_edges(faces, len(vertices))[0] == 0:
         return faces
+    n_shells, label, _ = _shells(faces, len(vertices))
+    lone = (np.bincount(label, minlength=n_shells) <= LONE_SHELL)[label]
+    if lone.all():
+        return faces
+    kept, faces = faces[lone], faces[~lone]
     before = _boundary_loops(faces, len(vertices))
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
     try:
         trimesh.repair.fill_holes(mesh)  # triangle and quad holes only, oriented to the rim
     except Exception:  # noqa: BLE001 - a failed fill leaves the mesh open, which is reported
-        return faces
+        return np.concatenate([faces, kept])
     if len(mesh.faces) == len(faces):
-        return faces
+        return np.concatenate([faces, kept])
     filled = np.asarray(mesh.faces, dtype=np.int64)
     holes = before - _boundary_loops(filled, len(vertices))
     added = len(filled) - len(faces)
@@ -473,7 +489,7 @@ def _fill_holes(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) ->
         f"filled {holes} {'hole' if holes == 1 else 'holes'} with {added}"
         f" {'triangle' if added == 1 else 'triangles'}"
     )
-    return filled
+    return np.concatenate([filled, kept])
 
 
 def _boundary_loops(faces: np.ndarray, n_vertices: int) -> int:
