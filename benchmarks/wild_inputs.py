@@ -148,13 +148,22 @@ def _voxelastic(path: str, queue) -> None:
                "iterations": result.solver.iterations, "warnings": list(result.solver.warnings)})
 
 
+def _reporting(target, path: str, queue) -> None:
+    """target(path, queue), its exception (the mesher's own message) queued as the result."""
+    try:
+        target(path, queue)
+    except Exception as exc:  # noqa: BLE001 - what the tool said is the record
+        queue.put({"error": f"{type(exc).__name__}: {exc}"})
+
+
 def attempt(target, path: Path, timeout: float) -> dict:
     try:
-        return {"meshed": True, **run_isolated(target, str(path), timeout=timeout)}
+        out = run_isolated(_reporting, target, str(path), timeout=timeout)
     except TimeoutError:
         return {"meshed": False, "why": f"no mesh within {timeout:g} s"}
-    except RuntimeError as exc:  # the child died or raised: its error is printed above
+    except RuntimeError as exc:  # the child died without a word (a crash in native code)
         return {"meshed": False, "why": str(exc)}
+    return {"meshed": False, "why": out["error"]} if "error" in out else {"meshed": True, **out}
 
 
 def main() -> None:
