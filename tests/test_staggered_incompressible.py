@@ -211,3 +211,18 @@ def test_backward_euler_at_nu_04999_stays_fast_and_relaxes_to_the_static_tip():
         assert np.all((tips > -1e-6) & (tips < 2.0)), tips
         if last is not None:
             assert tips[-1] == pytest.approx(last, rel=1e-3), tips
+
+
+def test_a_static_method_keeps_no_face_fractions_and_says_why_it_has_no_mass():
+    """Built for static or quasi-static runs (``dynamic=False``, what a job's spec gives), the
+    held ball drops the face fractions on every level (they weigh only the mass and a free body's
+    modes); asking it for a time step is then a clear error. Built for dynamics it keeps them."""
+    static = held_body(3)
+    static_only = StaggeredElasticity(fractions=volume_fractions(static.surface, static.grid), surface=static.surface,
+                                      material=static.material, prescribed=static.prescribed, dynamic=False)
+    assert static.level.vf_host is not None
+    assert all(lv.vf_host is None for lv in static_only.multigrid.levels)
+    with pytest.raises(RuntimeError, match="built for static analyses"):
+        static_only.set_time_step(1e-3)
+    u = static_only.solve().u
+    np.testing.assert_allclose(u, static.solve().u, rtol=0, atol=1e-12 * np.abs(u).max())

@@ -55,6 +55,7 @@ class StaggeredElasticity(StaggeredFields):
     max_iterations: int = 5000
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
+    dynamic: bool = True  # False: no backward-Euler steps will come, so no mass is ever needed
 
     def __post_init__(self, fractions: VolumeFractions) -> None:
         say = self.progress or no_progress
@@ -109,6 +110,7 @@ class StaggeredElasticity(StaggeredFields):
                 "solution is the one with no rigid motion (orthogonal to those modes)"
             )
         del points  # setup only (24 bytes per unknown: 0.46 GiB at 256^3), gone before the multigrid's arrays
+        self.dof_body = None  # setup only (the loads' moment couples and the modes), 4 bytes per unknown
         if level.slivers:
             self.warnings.append(
                 f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
@@ -116,6 +118,11 @@ class StaggeredElasticity(StaggeredFields):
             )
         self.multigrid = Multigrid(level, progress=lambda part, share: say(part, 0.5 + 0.5 * share))
         self.space = _Space(level)
+        if not self.dynamic:
+            # the face fractions weigh the mass and the rigid modes' projection only: a static or
+            # quasi-static run keeps them for a free body alone (10 bytes per unknown on the fine level)
+            for lv in self.multigrid.levels[0 if not self.modes else 1:]:
+                lv.vf_host = None
 
     # ------------------------------------------------------------------ setup
     def sample_points(self) -> np.ndarray:

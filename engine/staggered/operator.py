@@ -48,7 +48,8 @@ class Level:
     """The operator on one level. Fractions: vc [size] cells, ve [pairs, size] edges, vf [d, size]
     faces (control-volume fractions in [0, 1], f64 host arrays); spacing h [m]; lam, mu [Pa].
     ``dtype``: the float type of its device arrays (default the solve precision); ``active``
-    [d, size] bool when already known (else computed from vc). ``ve`` is pruned in place."""
+    [d, size] bool when already known (else computed from vc). ``ve`` is pruned in place.
+    ``vf_host`` becomes None where no mass will be needed (a static method's levels)."""
 
     def __init__(self, layout: TileLayout, spacing: float, vc: np.ndarray, ve: np.ndarray, vf: np.ndarray,
                  lam: float, mu: float, dtype: type | None = None, active: np.ndarray | None = None) -> None:
@@ -108,6 +109,8 @@ class Level:
         """A = K + shift M with M = rho h^d (Vf + ghost inertia) (backward Euler: shift = 1 / dt^2)."""
         self.shift, self.density = float(shift), float(density)
         if self.mass is None and shift != 0.0:
+            if self.vf_host is None:
+                raise RuntimeError("this level was built for static analyses (its face fractions are gone): no mass")
             inertia = self.vf_host if self.ghost_inertia is None else self.vf_host + self.ghost_inertia
             self.mass = device_array(density * self.spacing**self.dim * inertia, self.dtype)
         self._dinv = None

@@ -44,4 +44,5 @@ def make_staggered(spec, geo, functions, progress: Setup | None = None) -> Stagg
         rtol=spec.solver.rtol,
         max_iterations=spec.solver.max_iterations,
         progress=progress,
+        dynamic=spec.analysis.kind == "dynamic",
     )
