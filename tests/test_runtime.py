@@ -76,3 +76,49 @@ def test_a_kernel_compile_error_still_names_its_file_line_and_statement(tmp_path
     assert 'broken_kernel.py", line 7, in broken' in out.stdout, out.stdout
     assert "x[i] = undefined_name * 2.0" in out.stdout, out.stdout
     assert "undefined_name" in out.stdout.split("x[i] =")[-1], out.stdout
+
+
+def test_kernels_in_and_out_of_classes_are_told_apart_as_taichi_does(tmp_path):
+    """Importing the runtime swaps Taichi's class check (inspect.getframeinfo, a scan of every
+    module per decorator) for a read of the same line through linecache: a kernel in a
+    data-oriented class is still a class kernel (it takes self), a module-level one is not, and
+    both run."""
+    module = tmp_path / "placed_kernels.py"
+    module.write_text(textwrap.dedent(
+        """
+        import taichi as ti
+
+        @ti.kernel
+        def plain(x: ti.types.ndarray()):
+            for i in x:
+                x[i] = 2.0
+
+        @ti.data_oriented
+        class Scaler:
+            def __init__(self, factor):
+                self.factor = factor
+
+            @ti.kernel
+            def scale(self, x: ti.types.ndarray()):
+                for i in x:
+                    x[i] *= self.factor
+        """
+    ))
+    out = run_py(
+        f"""
+        import sys, numpy as np
+        sys.path.insert(0, {str(tmp_path)!r})
+        from engine import runtime
+        from taichi.lang import kernel_impl
+        print("patched", kernel_impl._inside_class.__module__)
+        runtime.init("cpu", "f64")
+        import placed_kernels as pk
+        x = np.zeros(3)
+        pk.plain(x)
+        pk.Scaler(3.0).scale(x)
+        print("class kernel", pk.Scaler.scale._is_classkernel, "plain", pk.plain._is_classkernel, x.tolist())
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    assert "patched engine.runtime" in out.stdout, out.stdout
+    assert "class kernel True plain False [6.0, 6.0, 6.0]" in out.stdout, out.stdout

@@ -9,6 +9,8 @@ well made the kernels compile for minutes). All arrays are float64 whatever the 
 
 import taichi as ti
 
+from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
+
 F64 = ti.f64
 ND3 = ti.types.ndarray(dtype=F64, ndim=3)
 ND4 = ti.types.ndarray(dtype=F64, ndim=4)

@@ -15,6 +15,8 @@ to the plane so that neighbouring sub-cells partition each facet without gaps.
 
 import taichi as ti
 
+from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
+
 # A triangle clipped by the six faces of a box has at most 3 + 6 vertices.
 MAX_VERTICES = 9
 Polygon = ti.types.matrix(MAX_VERTICES, 3, ti.f64)

@@ -19,6 +19,7 @@ import itertools
 
 import taichi as ti
 
+from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 from ..grid import axis_pairs
 
 B = 8

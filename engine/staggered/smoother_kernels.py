@@ -14,6 +14,7 @@ import itertools
 
 import taichi as ti
 
+from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 from ..grid import axis_pairs
 from .kernels import BITS, B, face_neighbours, local_coords, stored
 
