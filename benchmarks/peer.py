@@ -144,19 +144,30 @@ def _gmsh_mesh(name: str, radii: tuple[float, ...], h: float, curved: bool) -> _
         gmsh.finalize()
 
 
+def ftetwild(vertices: np.ndarray, faces: np.ndarray, **options) -> tuple[np.ndarray, np.ndarray]:
+    """(points [n, 3], tets [E, 4]) of ``pytetwild.tetrahedralize`` run in a scratch directory:
+    fTetWild writes ``__tracked_surface.stl`` into the working directory (a copy had been
+    committed at the repository root)."""
+    import contextlib
+    import tempfile
+
+    import pytetwild
+
+    with tempfile.TemporaryDirectory() as scratch, contextlib.chdir(scratch):
+        points, tets = pytetwild.tetrahedralize(np.asarray(vertices, dtype=np.float64),
+                                                np.asarray(faces, dtype=np.int32), **options)
+    return np.asarray(points, dtype=np.float64), np.asarray(tets, dtype=np.int64)
+
+
 def _stl_mesh(prob: Problem, h: float) -> _GmshMesh:
     """fTetWild (pytetwild) tetrahedra of the triangles voxelastic reads for the problem (its STL: the
     icospheres of ``verification.problems``), ideal edge length h [m], fTetWild's default envelope
     (1e-3 of the bounding box diagonal) and all cores: what a user meshing their STL would run. The
     tetrahedra are straight, so P2 on them is straight-sided."""
-    import pytetwild
-
     if prob.dim != 3:
         raise ValueError(f"geometry 'stl': a 3D problem, got {prob.name!r}")
     mesh = prob.surface_mesh()
-    points, tets = pytetwild.tetrahedralize(np.asarray(mesh.vertices, dtype=np.float64),
-                                            np.asarray(mesh.faces, dtype=np.int32), edge_length_abs=h)
-    return _GmshMesh(np.asarray(points, dtype=np.float64), np.asarray(tets, dtype=np.int64))
+    return _GmshMesh(*ftetwild(mesh.vertices, mesh.faces, edge_length_abs=h))
 
 
 def read_gmsh_mesh(dim: int, curved: bool) -> _GmshMesh:

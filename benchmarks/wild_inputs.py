@@ -86,15 +86,15 @@ def _tet_volume(points: np.ndarray, tets: np.ndarray) -> float:
 
 
 def _ftetwild(path: str, queue) -> None:
-    import pytetwild
     import trimesh
+
+    from .peer import ftetwild
 
     mesh = trimesh.load(path, process=False)
     t = time.perf_counter()
-    points, tets = pytetwild.tetrahedralize(np.asarray(mesh.vertices, dtype=np.float64),
-                                            np.asarray(mesh.faces, dtype=np.int32), edge_length_fac=0.1)
+    points, tets = ftetwild(mesh.vertices, mesh.faces, edge_length_fac=0.1)
     seconds = time.perf_counter() - t
-    volume = _tet_volume(np.asarray(points), np.asarray(tets))
+    volume = _tet_volume(points, tets)
     queue.put({"cells": int(len(tets)), "volume": volume, "seconds": seconds})
 
 
