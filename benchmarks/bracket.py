@@ -156,7 +156,7 @@ def _peer(stl: str, points: list, order: int, h: float, geometry: str, queue) ->
     K = skfem.asm(linear_elasticity(*lame_parameters(E, NU)), basis)
     t = np.asarray(TRACTION)[:, None, None]
     fb = skfem.FacetBasis(mesh, element, facets=disc.load_facets, intorder=2 * order)
-    f = skfem.asm(skfem.LinearForm(lambda v, w: dot(t + 0 * w.x, v)), fb)
+    f = skfem.asm(skfem.LinearForm(lambda v, w: dot(np.broadcast_to(t, w.x.shape), v)), fb)
     D = basis.get_dofs(facets=disc.dirichlet_facets).all()
     if geometry == "curved":  # the reference: a direct solve (pyamg's CG stalled short of 1e-10 at h = 3 mm)
         from pypardiso import spsolve

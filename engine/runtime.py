@@ -184,18 +184,22 @@ def kernel_input(values: np.ndarray, dtype: type | None = None):
     backend the host array itself when it already has the type (Taichi kernels read numpy arrays
     in place there, so a device copy would only double the memory), else :func:`device_array`."""
     values = np.asarray(values)
-    wanted = np.dtype(dtype or (solve_float() if values.dtype.kind in "fb" else values.dtype))
+    wanted = _stored_type(values, dtype)
     if ensure_initialized().arch == "cpu" and values.dtype == wanted and values.flags.c_contiguous:
         return values
     return device_array(values, wanted.type)
 
 
+def _stored_type(values: np.ndarray, dtype: type | None) -> np.dtype:
+    """The type an array of ``values`` is kept in: ``dtype``, else the solve precision for floats
+    and booleans, else their own."""
+    return np.dtype(dtype or (solve_float() if values.dtype.kind in "fb" else values.dtype))
+
+
 def device_array(values: np.ndarray, dtype: type | None = None):
     """A Taichi ndarray holding ``values`` (float arrays in the solve precision unless ``dtype``)."""
     values = np.asarray(values)
-    if dtype is None:
-        dtype = solve_float() if values.dtype.kind in "fb" else values.dtype
-    values = np.ascontiguousarray(values, dtype=dtype)
+    values = np.ascontiguousarray(values, dtype=_stored_type(values, dtype))
     out = device_zeros(values.shape, values.dtype.type)
     out.from_numpy(values)
     return out

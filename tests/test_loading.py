@@ -98,7 +98,8 @@ def test_gaps_as_wide_as_the_edges_and_closed_meshes_are_not_stitched():
     a = trimesh.creation.box(extents=[1, 1, 1])
     b = trimesh.creation.box(extents=[1, 1, 1])
     b.apply_translation([1 + 1e-7, 0, 0])
-    pair = mesh_surface(*(lambda m: (m.vertices, m.faces))(trimesh.util.concatenate([a, b])))
+    both = trimesh.util.concatenate([a, b])
+    pair = mesh_surface(both.vertices, both.faces)
     assert len(pair.vertices) == 16 and not any("cracks" in w for w in pair.warnings)
     # two strips of a sheet, edges 0.4-1.1 long, their facing rims `gap` apart: welded below 0.04
     for gap, welded in ((0.2, 0), (0.03, 2)):
