@@ -161,7 +161,8 @@ class DGMethod(SpecModel):
     penalty: float | None = Field(
         None, gt=0, json_schema_extra=not_null,
         description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+); doubled until the matrix is "
-                    "positive definite. Default by degree: 2.5 (k=1), 10 (k=2); a larger eta makes k=1 stiffer.")
+                    "positive definite. Default by degree: 2.5 (k=1), 5 (k=2); a larger eta stiffens both "
+                    "(k=2 near curved surfaces).")
     solver: Literal["auto", "direct", "iterative"] = Field(
         "auto", description="Linear solver: 'direct' sparse Cholesky (its memory grows superlinearly), 'iterative' CG "
                             "preconditioned by p-multigrid onto degree k-1 (to solver.rtol), 'auto' iterative above "

@@ -46,16 +46,19 @@ def free_sphere_error(nu: float, degree: int) -> float:
     lame = lame_problem(_radius(0.5), _radius(1.0), 1.0, 1.0, nu, _probes())
     m = DGElasticity(cut=cut, surface=s, material=Material(1.0, nu), degree=degree, flux="ip",
                      surface_loads=[SurfaceLoad(Ball(np.zeros(3), 0.75), "inner", pressure=1.0)])
-    assert m.eta == m.penalty  # the default penalty held at every nu
+    # the k = 2 start (5) is positive definite here up to nu 0.499; at 0.4999 the threshold lies between
+    # 5 and 6, so it doubles once (k = 1's start holds at every nu)
+    assert m.eta == (2 * m.penalty if degree == 2 and nu > 0.4995 else m.penalty)
     u = m.evaluate(m.solve().u, m.locate(lame.probes), lame.probes)
     return relative_l2(u, lame.exact(lame.probes))
 
 
 def test_quadratic_dg_error_on_the_free_thick_sphere_does_not_grow_with_nu():
-    # measured: 3.73e-3, 5.92e-3, 6.41e-3, 6.92e-3 (1.59 / 1.72 / 1.86x that of nu 0.3); with the whole
+    # measured (default eta 5, doubled to 10 at 0.4999): 2.57e-3, 3.83e-3, 4.09e-3, 6.92e-3 (1.49 / 1.59 /
+    # 2.69x that of nu 0.3); with eta 10 at every nu 3.73e-3, 5.92e-3, 6.41e-3, 6.92e-3; with the whole
     # normal jump penalised by lambda: 4.48e-3, 2.12e-2, 3.69e-2, 4.60e-2 (10.3x)
     errors = [free_sphere_error(nu, 2) for nu in NUS]
-    assert errors[0] < 4.2e-3, errors
+    assert errors[0] < 3e-3, errors
     assert max(errors) <= 3 * errors[0], errors
 
 
