@@ -125,21 +125,13 @@ def probes(stl: Path) -> np.ndarray:
     return np.concatenate(found)[:PROBES]
 
 
-def _facets_as_boundary(stl: str, h: float, subdivisions: int) -> None:
-    """A gmsh volume bounded by the STL's own triangles, each split into 4^``subdivisions`` at its
-    edge midpoints (the same surface, finer facets), meshed inside up to ``h``: the exact solid every
-    voxelastic method reads, which fTetWild only approximates (within its envelope)."""
+def _facets_as_boundary(stl: str, h: float) -> None:
+    """A gmsh volume bounded by the STL's own triangles, meshed inside up to ``h``: the exact solid
+    every voxelastic method reads, which fTetWild only approximates (within its envelope). (Each
+    facet split in 4 as well, the P2 system outgrew this machine's 24 GB in PARDISO.)"""
     import gmsh
-    import trimesh
 
-    surface = trimesh.load(stl, force="mesh")
-    vertices, faces = surface.vertices, surface.faces
-    for _ in range(subdivisions):
-        vertices, faces = trimesh.remesh.subdivide(vertices, faces)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = str(Path(tmp) / "facets.stl")
-        trimesh.Trimesh(vertices, faces, process=False).export(path)
-        gmsh.merge(path)
+    gmsh.merge(stl)
     loop = gmsh.model.geo.addSurfaceLoop([tag for _, tag in gmsh.model.getEntities(2)])
     gmsh.model.geo.addVolume([loop])
     gmsh.model.geo.synchronize()
@@ -148,8 +140,8 @@ def _facets_as_boundary(stl: str, h: float, subdivisions: int) -> None:
 
 def _peer(stl: str, points: list, order: int, h: float, geometry: str, queue) -> None:
     """scikit-fem P``order`` on fTetWild's mesh of the STL ("stl"), on gmsh's of the CAD solid
-    ("curved": isoparametric P2) or on gmsh's inside the STL's own facets ("facets1": each split in
-    4 once, see :func:`_facets_as_boundary`); queue: u at the points, seconds, DOFs."""
+    ("curved": isoparametric P2) or on gmsh's inside the STL's own facets ("facets", see
+    :func:`_facets_as_boundary`); queue: u at the points, seconds, DOFs."""
     import gmsh
     import skfem
     import trimesh
@@ -168,8 +160,8 @@ def _peer(stl: str, points: list, order: int, h: float, geometry: str, queue) ->
         gmsh.initialize(interruptible=False)
         try:
             gmsh.option.setNumber("General.Terminal", 0)
-            if geometry.startswith("facets"):
-                _facets_as_boundary(stl, h, int(geometry[len("facets"):]))
+            if geometry == "facets":
+                _facets_as_boundary(stl, h)
                 made = read_gmsh_mesh(3, False)
             else:
                 _build()
@@ -266,7 +258,7 @@ def main() -> None:
         print(f"reference: isoparametric P2 at h = {reference_sizes[-1]:g} ({refs[-1]['dofs']} DOFs, "
               f"{refs[-1]['seconds']:.0f} s); at h = {reference_sizes[0]:g} it differs by "
               f"{out['reference']['coarser_vs_finer']:.2e}", flush=True)
-        facets = run_isolated(_peer, str(stl), points, 2, STL_REFERENCE_SIZE, "facets0")
+        facets = run_isolated(_peer, str(stl), points, 2, STL_REFERENCE_SIZE, "facets")
         stl_reference = facets["u"]
         out["stl_reference"] = {"dofs": facets["dofs"], "seconds": facets["seconds"],
                                 "vs_cad": error(stl_reference, reference)}
