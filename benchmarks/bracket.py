@@ -127,8 +127,9 @@ def probes(stl: Path) -> np.ndarray:
 
 def _facets_as_boundary(stl: str, h: float) -> None:
     """A gmsh volume bounded by the STL's own triangles, meshed inside up to ``h``: the exact solid
-    every voxelastic method reads, which fTetWild only approximates (within its envelope). (Each
-    facet split in 4 as well, the P2 system outgrew this machine's 24 GB in PARDISO.)"""
+    every voxelastic method reads, which fTetWild only approximates (within its envelope). Finer
+    facets would refine it at the surface, but with each one split in 4 the P2 system outgrew this
+    machine's 24 GB in PARDISO."""
     import gmsh
 
     gmsh.merge(stl)

@@ -37,13 +37,14 @@ from .problem import COARSE_DIRECT, DIRECT_LIMIT, DIRECT_LIMIT_INCOMPRESSIBLE, I
 from .quadrature import VolumeRule, volume_rule
 
 # Kaufmann et al. 9.1 start low and double until positive definite: a large eta pushes the method
-# towards continuous P_k on the hex grid, which for k = 1 stiffens bending (cantilever tip 0.1005 at 2.5,
-# 0.0947 at 5) and for k = 2 biases stresses and displacements near curved surfaces (thick sphere at
-# h = 1/8, outer-surface von Mises max over the exact: 1.013 / 1.018 / 1.031 / 1.057 at eta 3 / 5 / 10 /
-# 20; the bracket benchmark at 5 mm: 9.0e-3 at 5, 1.8e-2 at 10). The matrix becomes positive definite
-# at k = 1 between 1.25 and 1.5 on the ball (1 and 2 on the thick sphere); at k = 2 between 2 and 2.5 on
-# the thick sphere, 3 and 4 on the ball, 3 and 5 on the bracket, and between 5 and 6 on the sphere at
-# nu 0.4999, where the start doubles once (docs/benchmarks.md, "The DG penalty").
+# towards continuous P_k on the hex grid, which for k = 1 stiffens bending (tests/test_dg.py's bar:
+# tip 0.1027 at 2.5, 0.0984 at 5) and for k = 2 biases stresses and displacements near curved
+# surfaces (thick sphere at h = 1/8, outer-surface von Mises max over the exact: 1.013 / 1.018 /
+# 1.031 / 1.057 at eta 3 / 5 / 10 / 20; the bracket benchmark at 5 mm: 9.0e-3 at 5, 1.8e-2 at 10).
+# The matrix becomes positive definite at k = 1 between 1.25 and 1.5 on the ball (1 and 2 on the
+# thick sphere); at k = 2 between 2 and 2.5 on the thick sphere, 3 and 4 on the ball, 3 and 5 on the
+# bracket, and between 5 and 6 on the sphere at nu 0.4999, where the start doubles once
+# (docs/benchmarks.md, "The DG penalty").
 DEFAULT_PENALTY = {1: 2.5, 2: 5.0}
 # k = 1 stresses are constant per element, so the IP consistency terms see only the face mean of a jump,
 # and only that part needs eta for coercivity. The rest is what a piecewise-affine field cannot avoid
