@@ -17,8 +17,17 @@ from . import kernels
 from .elements import Elements
 from .integrals import Basis, PatchProjection, element_gradients, face_products, patch_products
 
-CHUNK = 8192  # blocks added at a time: bounds the temporary copies
-FACE_CHUNK = 8192  # faces integrated at a time: their moments and products are the big temporaries
+FACE_CHUNK = 2048  # faces integrated at a time: their moments and products are the big temporaries
+
+
+def touched(shape: tuple[int, ...]) -> np.ndarray:
+    """A zeroed float64 array [shape] whose pages numpy has already faulted in. np.empty asks for huge
+    pages (numpy advises them for large arrays) and numpy's sequential fill faults them in at several
+    GB/s; pages first touched inside a Taichi kernel (np.zeros' lazy pages or np.empty's) came in at
+    0.4-0.7 GB/s on the development VM, which was half of the DG assembly's time at 32^3."""
+    out = np.zeros(shape)
+    out.fill(0.0)
+    return out
 
 
 @dataclass
@@ -74,7 +83,7 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     # one reference face per axis, then every other face
     picks = [np.nonzero(ref & (el.axis == a))[0][:1] for a in range(3)]
     todo = np.concatenate(picks + [np.nonzero(~ref)[0]]).astype(np.int64)
-    blocks = np.empty((len(todo), 2, 2, s, s))
+    blocks = touched((len(todo), 2, 2, s, s))
     for lo in range(0, len(todo), FACE_CHUNK):
         faces = todo[lo:lo + FACE_CHUNK]
         M, N, P = face_products(el, basis, faces, rest)
@@ -125,16 +134,16 @@ def to_matrix(groups: list[Group], count: int) -> sp.bsr_matrix:
         parts += [rows * count + cols, cols[off] * count + rows[off]]
     keys = np.unique(np.concatenate(parts))
     del parts
-    data = np.zeros((len(keys), s, s))
+    data = touched((len(keys), s, s))
     for g in groups:
         rows, cols = g.rows.astype(np.int64), g.cols.astype(np.int64)
         source = g.pick if g.pick is not None else np.arange(len(g))
         off = rows != cols
-        for key, pick, blocks in ((rows * count + cols, source, g.data),
-                                  (cols[off] * count + rows[off], source[off], g.data.transpose(0, 2, 1))):
+        blocks = np.ascontiguousarray(g.data)  # a copy only for a strided view
+        for key, pick, transpose in ((rows * count + cols, source, 0), (cols[off] * count + rows[off], source[off], 1)):
             slots = np.searchsorted(keys, key)
             # rounds of distinct slots (an element's diagonal block comes from up to 3 faces of a group),
-            # each summed with one fancy-indexed add
+            # each added by one kernel call
             order = np.argsort(slots, kind="stable")
             sorted_slots = slots[order]
             first = np.concatenate([[True], sorted_slots[1:] != sorted_slots[:-1]]) if len(slots) else np.zeros(0, bool)
@@ -143,9 +152,7 @@ def to_matrix(groups: list[Group], count: int) -> sp.bsr_matrix:
             rank[order] = np.arange(len(slots)) - run_start
             for r in range(int(rank.max(initial=-1)) + 1):
                 take = np.nonzero(rank == r)[0]
-                for lo in range(0, len(take), CHUNK):
-                    part = take[lo:lo + CHUNK]
-                    data[slots[part]] += blocks[pick[part]]
+                kernels.add_blocks(data, slots[take], blocks, pick[take].astype(np.int64), transpose)
     indptr = np.zeros(count + 1, dtype=np.int64)
     np.add.at(indptr, keys // count + 1, 1)
     return sp.bsr_matrix((data, (keys % count).astype(np.int32), np.cumsum(indptr)), shape=(count * s, count * s))

@@ -220,9 +220,10 @@ class DGElasticity(BoundaryTerms, Fields):
 
         def faces(weights, owner) -> None:
             b, pick = assembly.face_blocks(el, basis, mu, lam, eta, weights, self.jump_rest)
-            groups.extend([assembly.Group(el.minus, el.minus, b[:, 0, 0], owner, pick),
-                           assembly.Group(el.plus, el.plus, b[:, 1, 1], owner, pick),
-                           assembly.Group(el.minus, el.plus, b[:, 0, 1], owner, pick)])
+            flat = b.reshape(-1, *b.shape[-2:])  # face f's block (X, Y) at 4 f + 2 X + Y: no strided views
+            groups.extend([assembly.Group(el.minus, el.minus, flat, owner, 4 * pick),
+                           assembly.Group(el.plus, el.plus, flat, owner, 4 * pick + 3),
+                           assembly.Group(el.minus, el.plus, flat, owner, 4 * pick + 1)])
 
         if warp:
             faces((1.0, 0.0, 0.0), None)

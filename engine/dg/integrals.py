@@ -121,22 +121,19 @@ def face_products(el: Elements, basis: Basis, faces: np.ndarray, rest: float = 1
         # offsets are whole cells, a handful of distinct ones: one shift matrix each
         unique, inverse = np.unique(offset, axis=0, return_inverse=True)
         A.append(basis.T[e] @ B.shift(k, unique)[inverse.reshape(-1)])
-    D = B.derivative(k)
-    n = basis.size
-    M = np.empty((len(faces), 2, 2, n, n))
-    N = np.empty((len(faces), 2, 2, 3, n, n))
-    # H[:, s, 0] are the face moments of monomial s (monomial 0 is 1): the basis' face integrals
-    means = [h**2 * (A[X] @ H[:, :, :1])[:, :, 0] for X in range(2)]
-    area = h**2 * H[:, 0, 0]
-    for X in range(2):
-        AH = A[X] @ H
-        for Y in range(2):
-            M[:, X, Y] = h**2 * (AH @ A[Y].swapaxes(-1, -2))
-            if rest != 1.0:
-                mean = means[X][:, :, None] * means[Y][:, None, :] / area[:, None, None]
-                M[:, X, Y] = mean + rest * (M[:, X, Y] - mean)
-            dY = A[Y][:, None] @ D[None]  # [F, 3, n, n]
-            N[:, X, Y] = h * (AH[:, None] @ dY.swapaxes(-1, -2))
+    n, F = basis.size, len(faces)
+    # both sides stacked (rows X n + I): one batched matmul per product, not one per side pair; numpy
+    # runs a stacked matmul slice by slice, so the count of calls times F is what costs
+    A2 = np.concatenate(A, axis=1)  # [F, 2 n, n]
+    AH = A2 @ H
+    M = h**2 * (AH @ A2.swapaxes(-1, -2))  # [F, (X, I), (Y, J)]
+    if rest != 1.0:
+        means = h**2 * AH[:, :, 0]  # H[:, s, 0] are the face moments of monomial s (monomial 0 is 1)
+        mean = means[:, :, None] * means[:, None, :] / (h**2 * H[:, 0, 0])[:, None, None]
+        M = mean + rest * (M - mean)
+    M = M.reshape(F, 2, n, 2, n).transpose(0, 1, 3, 2, 4)
+    dY = (A2[:, None] @ B.derivative(k)[None]).reshape(F, 6 * n, n)  # rows (a, Y, J)
+    N = (h * (AH @ dY.swapaxes(-1, -2))).reshape(F, 2, n, 3, 2, n).transpose(0, 1, 4, 3, 2, 5)
     return M, N, low_products(A, H, el.axis[faces], k, h)
 
 
@@ -241,12 +238,15 @@ def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: n
     owner[patches] = element
     T = basis.T[owner]
     H1, H2 = B.hankel(m1, k), B.hankel(m2, k)  # [b, c, n, n], [b, a, c, n, n]
-    Mnn = h**2 * np.einsum("bis,bacst,bjt->bacij", T, H2, T)
-    G = np.einsum("bjs,ast->bajt", T, B.derivative(k))
-    Nn = h * np.einsum("bis,bcst,bajt->bacij", T, H1, G)
+    # batched matmuls, not einsum: these chains were 0.35 s of the 32^3 shell's assembly as einsums
+    Tt = T.swapaxes(-1, -2)
+    Mnn = h**2 * (T[:, None, None] @ H2 @ Tt[:, None, None])
+    G = T[:, None] @ B.derivative(k)[None]  # [b, a, n, n] gradient coefficients
+    TH1 = T[:, None] @ H1  # [b, c, n, n]
+    Nn = h * (TH1[:, None] @ G[:, :, None].swapaxes(-1, -2))
     low = B.size(k - 1)
-    W = pseudo_root(np.einsum("bis,bst,bjt->bij", T[:, :low], B.hankel(m0, k), T[:, :low]))
-    R = h * np.einsum("bis,bcst,bjt,bju->bciu", T, H1, T[:, :low], W)
+    W = pseudo_root(T[:, :low] @ B.hankel(m0, k) @ Tt[:, :, :low])
+    R = h * (TH1 @ (Tt[:, :, :low] @ W)[:, None])
     return Mnn, Nn, area, PatchProjection(R, W / h)
 
 

@@ -18,6 +18,7 @@ ND5 = ti.types.ndarray(dtype=F64, ndim=5)
 ND6 = ti.types.ndarray(dtype=F64, ndim=6)
 ND1 = ti.types.ndarray(dtype=F64, ndim=1)
 NI1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+NL1 = ti.types.ndarray(dtype=ti.i64, ndim=1)
 ND2 = ti.types.ndarray(dtype=F64, ndim=2)
 
 
@@ -66,19 +67,21 @@ def face_blocks(M: ND5, P: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, 
     P[f, X, Y, I, J] = int_f Pi psi^X_I Pi psi^Y_J.
     """
     nb = M.shape[3]
-    for f, X, Y, I, J in ti.ndrange(M.shape[0], 2, 2, nb, nb):
+    for f, X, Y in ti.ndrange(M.shape[0], 2, 2):  # a plain inner loop: parallel over entries took 1.5x as long
         sx = 1.0 - 2.0 * X
         sy = 1.0 - 2.0 * Y
         wx = w_minus if X == 0 else w_plus
         wy = w_minus if Y == 0 else w_plus
         ax = axis[f]
-        for p in ti.static(range(3)):
-            for q in ti.static(range(3)):
-                pen = sx * sy * eta[f] * (mu * M[f, X, Y, I, J] * (delta(p, q) + delta(p, ax) * delta(q, ax))
-                                          + lam * P[f, X, Y, I, J] * delta(p, ax) * delta(q, ax))
-                cons = -0.5 * (wy * sx * traction(N, f, X, Y, I, J, p, q, ax, mu, lam)
-                               + wx * sy * traction(N, f, Y, X, J, I, q, p, ax, mu, lam))
-                out[f, X, Y, p * nb + I, q * nb + J] = w_pen * pen + cons
+        for I in range(nb):
+            for J in range(nb):
+                for p in ti.static(range(3)):
+                    for q in ti.static(range(3)):
+                        pen = sx * sy * eta[f] * (mu * M[f, X, Y, I, J] * (delta(p, q) + delta(p, ax) * delta(q, ax))
+                                                  + lam * P[f, X, Y, I, J] * delta(p, ax) * delta(q, ax))
+                        cons = -0.5 * (wy * sx * traction(N, f, X, Y, I, J, p, q, ax, mu, lam)
+                                       + wx * sy * traction(N, f, Y, X, J, I, q, p, ax, mu, lam))
+                        out[f, X, Y, p * nb + I, q * nb + J] = w_pen * pen + cons
 
 
 @ti.kernel
@@ -106,6 +109,26 @@ def nitsche_blocks(M: ND5, P: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F
                 pen = eta[b] * (mu * (delta(p, q) * mass + M[b, p, q, I, J]) + lam * P[b, p, q, I, J])
                 out[b, p * nb + I, q * nb + J] = (w_cons * (-mask[b, p] * t_ij - mask[b, q] * t_ji)
                                                   + w_pen * mask[b, p] * mask[b, q] * pen)
+
+
+@ti.kernel
+def add_blocks(data: ND3, slots: NL1, blocks: ND3, pick: NL1, transpose: ti.i32):
+    """data[slots[k]] += blocks[pick[k]] (transposed when ``transpose``) for every k; the slots are
+    distinct within one call, so the adds need no atomics (one read and one write of each entry:
+    numpy's fancy-indexed add made three copies of every block). Parallel over blocks with a plain
+    inner loop: 3x faster than parallel over entries, which indexed every entry anew."""
+    s = blocks.shape[1]
+    for k in range(slots.shape[0]):
+        src = pick[k]
+        dst = slots[k]
+        if transpose:
+            for i in range(s):
+                for j in range(s):
+                    data[dst, i, j] = data[dst, i, j] + blocks[src, j, i]  # a plain store, not an atomic add
+        else:
+            for i in range(s):
+                for j in range(s):
+                    data[dst, i, j] = data[dst, i, j] + blocks[src, i, j]
 
 
 @ti.kernel
