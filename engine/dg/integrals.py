@@ -220,7 +220,6 @@ def patch_products(el: Elements, basis: Basis, triangles: np.ndarray, element: n
     area [b] [m^2], and the projection onto degree < k (``PatchProjection``).
     """
     k, h = basis.degree, basis.h
-    n = basis.size
     tri = np.asarray(triangles, dtype=np.float64)
     corners = (tri - el.centres[element][:, None, :]) / h
     moments = area_terms(corners, 2 * k)  # [T, m] in element frames, h^2 units
