@@ -74,8 +74,9 @@ def face_penalty(el: Elements, eta: float) -> np.ndarray:
 
 def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, weights: tuple[float, float, float],
                 rest: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Interface blocks (blocks [U, 2, 2, 3 n, 3 n] (sides minus, plus), pick [F]): face f's blocks are
-    blocks[pick[f]]; faces between full cells share one reference block per axis. weights (penalty,
+    """Interface blocks (blocks [U, 3, 3 n, 3 n] of the side pairs (minus, minus), (plus, plus), (minus,
+    plus); (plus, minus) is the last one's transpose), pick [F]): face f's blocks are blocks[pick[f]];
+    faces between full cells share one reference block per axis. weights (penalty,
     consistency with the minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ.
     ``rest``: the penalty's weight on the part of the jump with zero mean over the face (its mean has
     weight 1). Computed FACE_CHUNK faces at a time: the face integrals take half a block's memory each."""
@@ -85,7 +86,7 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     # one reference face per axis, then every other face
     picks = [np.nonzero(ref & (el.axis == a))[0][:1] for a in range(3)]
     todo = np.concatenate(picks + [np.nonzero(~ref)[0]]).astype(np.int64)
-    blocks = touched((len(todo), 2, 2, s, s))
+    blocks = touched((len(todo), 3, s, s))
     for lo in range(0, len(todo), FACE_CHUNK):
         faces = todo[lo:lo + FACE_CHUNK]
         M, N, P = face_products(el, basis, faces, rest)

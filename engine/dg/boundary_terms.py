@@ -22,7 +22,7 @@ class BoundaryTerms:
     def _dirichlet_patches(self) -> dict:
         """Surface patches of the displacement boundaries: one row per (boundary, element)."""
         el = self.elements
-        tris, elem, patch, masks, values, names = [], [], [], [], [], []
+        tris, elem, patch, masks, values = [], [], [], [], []
         count = 0
         for k, bc in enumerate(self.prescribed):
             clipped, source = select_patch(bc.region, el.boundary_triangles, bc.name)
@@ -116,7 +116,7 @@ class BoundaryTerms:
 
     def _free_modes(self) -> list:
         """Per body, the rigid modes the Dirichlet patches leave free: (elements, basis [E_b*3*n, k])."""
-        el, basis, n = self.elements, self.basis, self.n
+        el, basis = self.elements, self.basis
         body = el.bodies()
         P = self.patches
         held = np.zeros((body.max() + 1, 6, 6))

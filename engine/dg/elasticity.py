@@ -220,10 +220,10 @@ class DGElasticity(BoundaryTerms, Fields):
 
         def faces(weights, owner) -> None:
             b, pick = assembly.face_blocks(el, basis, mu, lam, eta, weights, self.jump_rest)
-            flat = b.reshape(-1, *b.shape[-2:])  # face f's block (X, Y) at 4 f + 2 X + Y: no strided views
-            groups.extend([assembly.Group(el.minus, el.minus, flat, owner, 4 * pick),
-                           assembly.Group(el.plus, el.plus, flat, owner, 4 * pick + 3),
-                           assembly.Group(el.minus, el.plus, flat, owner, 4 * pick + 1)])
+            flat = b.reshape(-1, *b.shape[-2:])  # face f's side pair c at 3 f + c: no strided views
+            groups.extend([assembly.Group(el.minus, el.minus, flat, owner, 3 * pick),
+                           assembly.Group(el.plus, el.plus, flat, owner, 3 * pick + 1),
+                           assembly.Group(el.minus, el.plus, flat, owner, 3 * pick + 2)])
 
         if warp:
             faces((1.0, 0.0, 0.0), None)
