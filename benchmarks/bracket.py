@@ -28,15 +28,14 @@ cold time: nothing is compiled).
 
 from __future__ import annotations
 
-import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 from .geometry import run_isolated
+from .parts import Part, error, parser, peer, probes, run_methods, selected
 
 E, NU = 2.0e11, 0.3
 TRACTION = (1.0e6, 0.0, 0.0)
@@ -105,140 +104,20 @@ def _regions() -> tuple[list, list]:
     return clamps, [{"box": [[-1.0, -1.0, -1.0], [1e-4, 1.0, 1.0]]}]
 
 
-def _inside(region: dict, x: np.ndarray) -> np.ndarray:
-    """Points x [n, 3] in a region of :func:`_regions` (the peer's facets go by their centroid)."""
-    if "box" in region:
-        lo, hi = region["box"]
-        return np.all((x >= lo) & (x <= hi), axis=1)
-    return np.linalg.norm(x - region["sphere"]["center"], axis=1) <= region["sphere"]["radius"]
+def _cad(h: float) -> None:
+    """The CAD solid meshed at size h [m] (the "curved" reference)."""
+    _build()
+    _sizes(h)
 
 
-def probes(stl: Path) -> np.ndarray:
-    """PROBES points [m] inside the part, PROBE_DEPTH or more from its surface (a fixed seed)."""
-    import trimesh
-
-    mesh = trimesh.load(stl, force="mesh")
-    rng = np.random.default_rng(1)
-    found = []
-    while sum(len(f) for f in found) < PROBES:
-        x = rng.uniform(mesh.bounds[0], mesh.bounds[1], (4000, 3))
-        found.append(x[trimesh.proximity.signed_distance(mesh, x) > PROBE_DEPTH])
-    return np.concatenate(found)[:PROBES]
-
-
-def _facets_as_boundary(stl: str, h: float) -> None:
-    """A gmsh volume bounded by the STL's own triangles, meshed inside up to ``h``: the exact solid
-    every voxelastic method reads, which fTetWild only approximates (within its envelope). Finer
-    facets would refine it at the surface, but with each one split in 4 the P2 system outgrew this
-    machine's 24 GB in PARDISO."""
-    import gmsh
-
-    gmsh.merge(stl)
-    loop = gmsh.model.geo.addSurfaceLoop([tag for _, tag in gmsh.model.getEntities(2)])
-    gmsh.model.geo.addVolume([loop])
-    gmsh.model.geo.synchronize()
-    gmsh.option.setNumber("Mesh.MeshSizeMax", h)
-
-
-def _peer(stl: str, points: list, order: int, h: float, geometry: str, queue) -> None:
-    """scikit-fem P``order`` on fTetWild's mesh of the STL ("stl"), on gmsh's of the CAD solid
-    ("curved": isoparametric P2) or on gmsh's inside the STL's own facets ("facets", see
-    :func:`_facets_as_boundary`); queue: u at the points, seconds, DOFs."""
-    import gmsh
-    import skfem
-    import trimesh
-    from skfem.helpers import dot
-    from skfem.mapping import MappingAffine
-    from skfem.models.elasticity import lame_parameters, linear_elasticity
-
-    from .peer import _components, _Discretisation, _GmshMesh, _at_probes, _rigid_modes, _solve, ftetwild, \
-        read_gmsh_mesh, skfem_mesh
-
-    surface = trimesh.load(stl, force="mesh")
-    start = time.perf_counter()
-    if geometry == "stl":
-        made = _GmshMesh(*ftetwild(surface.vertices, surface.faces, edge_length_abs=h))
-    else:
-        gmsh.initialize(interruptible=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            if geometry == "facets":
-                _facets_as_boundary(stl, h)
-                made = read_gmsh_mesh(3, False)
-            else:
-                _build()
-                _sizes(h)
-                made = read_gmsh_mesh(3, order == 2)
-        finally:
-            gmsh.finalize()
-    mesh, linear = skfem_mesh(made, 3)
-    element = skfem.ElementVector(skfem.ElementTetP1() if order == 1 else skfem.ElementTetP2())
-    basis = skfem.Basis(mesh, element, intorder=2 * (order - 1))
-    boundary = mesh.boundary_facets()
-    centre = mesh.p[:, mesh.facets[:, boundary]].mean(axis=1).T  # facets go by their centroid
+def part() -> Part:
     clamps, loads = _regions()
-
-    def within(regions) -> np.ndarray:
-        return boundary[np.any([_inside(r, centre) for r in regions], axis=0)]
-
-    disc = _Discretisation(mesh, basis, MappingAffine(linear), within(clamps), within(loads))
-    K = skfem.asm(linear_elasticity(*lame_parameters(E, NU)), basis)
-    t = np.asarray(TRACTION)[:, None, None]
-    fb = skfem.FacetBasis(mesh, element, facets=disc.load_facets, intorder=2 * order)
-    f = skfem.asm(skfem.LinearForm(lambda v, w: dot(np.broadcast_to(t, w.x.shape), v)), fb)
-    D = basis.get_dofs(facets=disc.dirichlet_facets).all()
-    if geometry != "stl":  # the references: a direct solve (pyamg's CG stalled short of 1e-10 at h = 3 mm)
-        from pypardiso import spsolve
-
-        free = np.setdiff1d(np.arange(basis.N), D)
-        u, iterations = np.zeros(basis.N), 0
-        u[free] = spsolve(K.tocsr()[free][:, free].tocsr(), f[free])
-    else:
-        u, iterations, _ = _solve(K, f, np.zeros(basis.N), D, _rigid_modes(basis, _components(basis)), 3, RTOL, False)
-    values = _at_probes(disc, u, np.asarray(points).T.copy(), "nearest")[0]
-    queue.put({"u": values.tolist(), "seconds": time.perf_counter() - start, "dofs": int(basis.N),
-               "iterations": iterations})
-
-
-def _voxelastic(stl: str, points: list, method: dict, h: float, queue) -> None:
-    """One job run twice in a fresh process: the first is cold (Taichi compiles or loads its kernels,
-    as in one CLI run; ``seconds_cold``), the second warm (``seconds``, its displacements)."""
-    from engine import simulate
-    from engine.geometry.cache import GeometryCache
-
-    clamps, loads = _regions()
-    spec = {
-        "geometry": {"mesh": stl},
-        "grid": {"cell_size": h},
-        "method": method,
-        "material": {"youngs_modulus": E, "poisson_ratio": NU},
-        "boundaries": [{"kind": "displacement", "name": f"bolt{k}", "region": region, "value": [0, 0, 0]}
-                       for k, region in enumerate(clamps)]
-        + [{"kind": "traction", "name": "push", "region": loads[0], "value": list(TRACTION), "facing": FACING}],
-        "solver": {"rtol": RTOL},
-        "output": {"fields": ["displacement"], "probes": points, "surface": False},
-    }
-    start = time.perf_counter()
-    simulate(spec, cache=GeometryCache(None))
-    cold = time.perf_counter() - start
-    start = time.perf_counter()
-    result = simulate(spec, cache=GeometryCache(None))
-    queue.put({"u": np.asarray(result.fields.probes["displacement"]).tolist(), "seconds_cold": cold,
-               "seconds": time.perf_counter() - start, "iterations": result.solver.iterations})
-
-
-def error(u: list, reference: list) -> float:
-    u, ref = np.asarray(u), np.asarray(reference)
-    return float(np.linalg.norm(u - ref) / np.linalg.norm(ref))
+    return Part(young=E, poisson=NU, clamps=tuple(clamps), load=loads[0], traction=TRACTION, load_facing=FACING,
+                cad=_cad, rtol=RTOL)
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="coarser sizes only (a few minutes)")
-    ap.add_argument("--method", action="append", help="run only this method (repeatable), e.g. 'DG k = 2'")
-    ap.add_argument("--h", type=float, nargs="*", help="with --method: these sizes [m] instead of its own")
-    ap.add_argument("--json")
-    args = ap.parse_args()
+    args = parser(__doc__).parse_args()
     reference_sizes = (0.004, 0.0025) if args.quick else (0.003, 0.002)
     runs = {
         "staggered": [("vox", {"kind": "staggered"}, h) for h in (0.004, 0.002, 0.001, 0.0005)],
@@ -246,43 +125,28 @@ def main() -> None:
         "P1 on the STL": [("peer", 1, h) for h in (0.006, 0.004, 0.0025)],
         "P2 on the STL": [("peer", 2, h) for h in (0.008, 0.005, 0.0035)],
     }
-    if args.quick:
-        runs = {k: v[:2] for k, v in runs.items()}
-    if args.method:
-        runs = {k: [(kind, what, h) for h in args.h] if args.h else v
-                for k, v in runs.items() for kind, what, _ in v[:1] if k in args.method}
+    runs = selected(runs, args)
     out: dict = {"reference_sizes": reference_sizes, "stl_reference_size": STL_REFERENCE_SIZE, "rows": []}
     with tempfile.TemporaryDirectory() as tmp:
         stl = Path(tmp) / "bracket.stl"
         write_stl(stl)
-        points = probes(stl).tolist()
-        refs = [run_isolated(_peer, str(stl), points, 2, h, "curved") for h in reference_sizes]
+        points = probes(str(stl), PROBES, PROBE_DEPTH).tolist()
+        bracket = part()
+        refs = [run_isolated(peer, str(stl), points, 2, h, "curved", bracket) for h in reference_sizes]
         reference = refs[-1]["u"]
         out["reference"] = {"dofs": refs[-1]["dofs"], "seconds": refs[-1]["seconds"],
                             "coarser_vs_finer": error(refs[0]["u"], reference)}
         print(f"reference: isoparametric P2 at h = {reference_sizes[-1]:g} ({refs[-1]['dofs']} DOFs, "
               f"{refs[-1]['seconds']:.0f} s); at h = {reference_sizes[0]:g} it differs by "
               f"{out['reference']['coarser_vs_finer']:.2e}", flush=True)
-        facets = run_isolated(_peer, str(stl), points, 2, STL_REFERENCE_SIZE, "facets")
+        facets = run_isolated(peer, str(stl), points, 2, STL_REFERENCE_SIZE, "facets", bracket)
         stl_reference = facets["u"]
         out["stl_reference"] = {"dofs": facets["dofs"], "seconds": facets["seconds"],
                                 "vs_cad": error(stl_reference, reference)}
         print(f"STL reference: P2 inside the STL's facets at h = {STL_REFERENCE_SIZE:g} ({facets['dofs']} DOFs, "
               f"{facets['seconds']:.0f} s); it differs from the CAD reference by {out['stl_reference']['vs_cad']:.2e}",
               flush=True)
-        for name, cases in runs.items():
-            for kind, what, h in cases:
-                if kind == "vox":
-                    r = run_isolated(_voxelastic, str(stl), points, what, h)
-                else:
-                    r = run_isolated(_peer, str(stl), points, what, h, "stl")
-                row = {"method": name, "h": h, "seconds": r["seconds"],
-                       "seconds_cold": r.get("seconds_cold", r["seconds"]), "error": error(r["u"], reference),
-                       "error_stl": error(r["u"], stl_reference), "iterations": r.get("iterations"),
-                       "dofs": r.get("dofs")}
-                out["rows"].append(row)
-                print(f"{name:14s} h = {h:<7g} error {row['error']:.2e} (STL's {row['error_stl']:.2e})  "
-                      f"{row['seconds']:7.1f} s (cold {row['seconds_cold']:.1f} s)", flush=True)
+        out["rows"] = run_methods(runs, str(stl), points, bracket, {"error": reference, "error_stl": stl_reference})
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
 
