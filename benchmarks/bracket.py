@@ -34,8 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .geometry import run_isolated
-from .parts import Part, error, parser, peer, probes, run_methods, selected
+from .parts import Part, error, parser, probes, reference, run_methods, selected
 
 E, NU = 2.0e11, 0.3
 TRACTION = (1.0e6, 0.0, 0.0)
@@ -132,21 +131,13 @@ def main() -> None:
         write_stl(stl)
         points = probes(str(stl), PROBES, PROBE_DEPTH).tolist()
         bracket = part()
-        refs = [run_isolated(peer, str(stl), points, 2, h, "curved", bracket) for h in reference_sizes]
-        reference = refs[-1]["u"]
-        out["reference"] = {"dofs": refs[-1]["dofs"], "seconds": refs[-1]["seconds"],
-                            "coarser_vs_finer": error(refs[0]["u"], reference)}
-        print(f"reference: isoparametric P2 at h = {reference_sizes[-1]:g} ({refs[-1]['dofs']} DOFs, "
-              f"{refs[-1]['seconds']:.0f} s); at h = {reference_sizes[0]:g} it differs by "
-              f"{out['reference']['coarser_vs_finer']:.2e}", flush=True)
-        facets = run_isolated(peer, str(stl), points, 2, STL_REFERENCE_SIZE, "facets", bracket)
-        stl_reference = facets["u"]
-        out["stl_reference"] = {"dofs": facets["dofs"], "seconds": facets["seconds"],
-                                "vs_cad": error(stl_reference, reference)}
-        print(f"STL reference: P2 inside the STL's facets at h = {STL_REFERENCE_SIZE:g} ({facets['dofs']} DOFs, "
-              f"{facets['seconds']:.0f} s); it differs from the CAD reference by {out['stl_reference']['vs_cad']:.2e}",
-              flush=True)
-        out["rows"] = run_methods(runs, str(stl), points, bracket, {"error": reference, "error_stl": stl_reference})
+        cad, out["reference"] = reference(points, bracket, "curved", [(str(stl), h) for h in reference_sizes],
+                                          f"reference: isoparametric P2 at h = {reference_sizes[-1]:g}")
+        solid, out["stl_reference"] = reference(points, bracket, "facets", [(str(stl), STL_REFERENCE_SIZE)],
+                                                f"STL reference: P2 inside its facets at h = {STL_REFERENCE_SIZE:g}")
+        out["stl_reference"]["vs_cad"] = error(solid, cad)
+        print(f"the STL reference differs from the CAD reference by {out['stl_reference']['vs_cad']:.2e}", flush=True)
+        out["rows"] = run_methods(runs, str(stl), points, bracket, {"error": cad, "error_stl": solid})
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
 

@@ -220,6 +220,21 @@ def error(u: list, reference: list) -> float:
     return float(np.linalg.norm(u - ref) / np.linalg.norm(ref))
 
 
+def reference(points: list, part: Part, geometry: str, meshes: list[tuple[str, float]], label: str
+              ) -> tuple[list, dict]:
+    """P2 by PARDISO on the part meshed by ``geometry`` ("facets" or "curved") for each (STL, size [m]),
+    coarsest first: u at the points of the last, and its DOFs, seconds and (with two or more) how far
+    the one before is from it."""
+    refs = [run_isolated(peer, stl, points, 2, h, geometry, part) for stl, h in meshes]
+    summary = {"dofs": refs[-1]["dofs"], "seconds": refs[-1]["seconds"]}
+    line = f"{label} ({refs[-1]['dofs']} DOFs, {refs[-1]['seconds']:.0f} s)"
+    if len(refs) > 1:
+        summary["coarser_vs_finer"] = error(refs[-2]["u"], refs[-1]["u"])
+        line += f"; the coarser one differs by {summary['coarser_vs_finer']:.2e}"
+    print(line, flush=True)
+    return refs[-1]["u"], summary
+
+
 def run_methods(runs: dict[str, list], stl: str, points: list, part: Part, references: dict[str, list]) -> list[dict]:
     """Each method's runs (name -> [("vox", method spec, h) or ("peer", order, h)], the peer on
     fTetWild's mesh of the STL), each in its own process; a row per run with its error against every
