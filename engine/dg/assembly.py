@@ -23,10 +23,10 @@ FACE_CHUNK = 1024  # faces integrated at a time: their products (~20 MB at k = 2
 
 
 def touched(shape: tuple[int, ...]) -> np.ndarray:
-    """A zeroed float64 array [shape] whose pages numpy has already faulted in. np.empty asks for huge
-    pages (numpy advises them for large arrays) and numpy's sequential fill faults them in at several
-    GB/s; pages first touched inside a Taichi kernel (np.zeros' lazy pages or np.empty's) came in at
-    0.4-0.7 GB/s on the development VM, which was half of the DG assembly's time at 32^3."""
+    """A zeroed float64 array [shape] whose pages numpy has already faulted in: numpy's sequential fill
+    faults them in at 2-3 GB/s on the development VM, while pages first touched inside a Taichi kernel
+    (scattered, from two threads) came in at 0.4-0.7 GB/s, which was half of the DG assembly's time at
+    32^3 (docs/benchmarks.md, "DG at scale")."""
     out = np.zeros(shape)
     out.fill(0.0)
     return out
