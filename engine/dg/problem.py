@@ -26,8 +26,11 @@ INCOMPRESSIBLE_RATIO = 100.0  # lambda / mu, nu ~ 0.495
 DIRECT_LIMIT_INCOMPRESSIBLE = {1: 400_000, 2: 200_000}
 # A p-multigrid coarse level with more unknowns than this is itself cycled, not factorised: the k = 1
 # level's factor fills superlinearly (170,880 unknowns: 15 s, 1.8 GiB; 567,072: ~150 s, ~10 GiB), while
-# cycling it over the constants costs iterations (the 32^3 shell: 24 -> 86, 26.5 -> 38 s, 3.0 -> 1.8 GiB)
-COARSE_DIRECT = 300_000
+# cycling it over the constants costs iterations, how many depends on the part (the 32^3 shell: 24 -> 86,
+# 26.5 -> 38 s, 3.0 -> 1.8 GiB; the 48^3 shell's 567k level: 91, 162 s and 5.8 GiB against 193 s and 13.7
+# GiB factorised; benchmarks.scan's bunny at 2 mm, 301,884: 319 iterations and 287 s against 33 and 101 s,
+# 6.75 GiB, factorised). 400k lies between the bunny, where factorising wins 2.8x, and the 48^3 shell.
+COARSE_DIRECT = 400_000
 
 
 def estimate_memory(grid: Grid, method_spec) -> int:
