@@ -7,7 +7,7 @@ The model: the npm package ``bunny`` 1.0.1 (public domain; the Stanford 3D Scann
 bunny, decimated and closed by its author: 1,839 vertices, 3,674 triangles, watertight), fetched from
 the npm registry on first use into ~/.cache/voxelastic (or read from ``--tarball``) and checked
 against its published SHA-1, scaled from its units to metres by 0.01: a 9.9 x 9.7 x 7.5 cm solid,
-triangles 1.8-10 mm, ears about 1 cm thick. A PLA print of it: E = 3.5e9 Pa, nu = 0.36, 1,240 kg/m^3.
+triangles with edges of 1.8-10 mm (mean 3.8 mm). A PLA print of it: E = 3.5e9 Pa, nu = 0.36, 1,240 kg/m^3.
 Its base (the facets within 20 degrees of facing down, all below y = 5 mm: no such facet crosses that
 plane, so clipping and the peer's centroid rule take the same 268 facets) is held; gravity 9.81 m/s^2
 down (-y) and the table's 5 g along x load it. No closed form: the reference is P2 on gmsh's
