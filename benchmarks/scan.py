@@ -5,7 +5,8 @@ solved by voxelastic from its STL and by the peer meshing that STL, against P2 o
 
 The model: the npm package ``bunny`` 1.0.1 (public domain; the Stanford 3D Scanning Repository's
 bunny, decimated and closed by its author: 1,839 vertices, 3,674 triangles, watertight), fetched from
-the npm registry on first use into ~/.cache/voxelastic (or read from ``--tarball``) and checked
+the npm registry on first use into the engine's cache root (``VOXELASTIC_CACHE_DIR``, default
+~/.cache/voxelastic; or read from ``--tarball``) and checked
 against its published SHA-1, scaled from its units to metres by 0.01: a 9.9 x 9.7 x 7.5 cm solid,
 triangles with edges of 1.8-10 mm (mean 3.8 mm). A PLA print of it: E = 3.5e9 Pa, nu = 0.36, 1,240 kg/m^3.
 Its base (the facets within 20 degrees of facing down, all below y = 5 mm: no such facet crosses that
@@ -49,7 +50,9 @@ BUNNY = Part(young=3.5e9, poisson=0.36, density=1240.0, gravity=(5 * 9.81, -9.81
 def _tarball(path: Path | None) -> bytes:
     """The package's bytes: from ``path``, else the cache, else the registry (then cached)."""
     if path is None:
-        path = Path.home() / ".cache" / "voxelastic" / "bunny-1.0.1.tgz"
+        from engine.geometry.cache import cache_root
+
+        path = cache_root() / "bunny-1.0.1.tgz"
         if not path.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
             with urllib.request.urlopen(TARBALL, timeout=60) as response:
