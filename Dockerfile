@@ -21,15 +21,14 @@ RUN pip wheel --no-cache-dir --no-deps --wheel-dir /wheels/project .
 FROM python:3.11-slim
 ENV PYTHONUNBUFFERED=1 \
     PYTHONDONTWRITEBYTECODE=1 \
-    TI_SKIP_VERSION_CHECK=ON \
     VOXELASTIC_CACHE_DIR=/home/voxelastic/.cache/voxelastic \
     VOXELASTIC_DATA_DIR=/data \
     VOXELASTIC_HOST=0.0.0.0 \
     VOXELASTIC_PORT=8000
-# Shared libraries the wheels link but do not bundle: Taichi's core links the X11 client library
-# (libX11.so.6 and what it pulls in: libxcb, libXau, libXdmcp); without it no worker process can
-# start ("ImportError: libX11.so.6", issue 18). zlib is in the base already. VTK renders the
-# preview pictures off screen through Mesa's EGL (software; no display, no GPU).
+# Shared libraries the wheels need but do not bundle. VTK renders the preview pictures off screen
+# through Mesa's EGL (software; no display, no GPU). The X11 client library was what Taichi 1.7's
+# core linked (without it no worker started, issue 18); gstaichi does not link it, and it stays
+# until VTK's preview path is checked in an image without it. zlib is in the base already.
 RUN apt-get update \
     && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libx11-6 \
        libegl1 libegl-mesa0 libgl1-mesa-dri libxrender1 \

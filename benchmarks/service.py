@@ -62,8 +62,7 @@ class Service:
     def __init__(self, workdir: Path, cache_dir: str, **settings):
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        env = dict(os.environ, VOXELASTIC_DATA_DIR=str(workdir / "data"), VOXELASTIC_CACHE_DIR=cache_dir,
-                   TI_SKIP_VERSION_CHECK="ON")
+        env = dict(os.environ, VOXELASTIC_DATA_DIR=str(workdir / "data"), VOXELASTIC_CACHE_DIR=cache_dir)
         env.update({f"VOXELASTIC_{k.upper()}": str(v) for k, v in settings.items()})
         self.log = open(workdir / "server.log", "wb")
         self.proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "serve", "--port", str(self.port),

@@ -41,10 +41,9 @@ import os as _os
 
 __version__ = "0.2.0"
 
-# Set before any module imports taichi: no version check calling out to the internet, and no
-# banner on stdout (stdout carries the CLI's output).
-_os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
-_os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+# Set before any module imports Taichi (the gstaichi build): no banner on stdout, which carries the
+# CLI's output.
+_os.environ.setdefault("ENABLE_GSTAICHI_HEADER_PRINT", "False")
 
 
 def simulate(spec, mesh=None, **options):

@@ -1,23 +1,33 @@
-"""The one place that initialises Taichi.
+"""The one place that initialises Taichi (the maintained gstaichi build).
 
-Kernel modules import ``taichi`` for decorators; only :func:`init` calls ``ti.init``. Importing
+Kernel modules import ``gstaichi`` for decorators; only :func:`init` calls ``ti.init``. Importing
 this module does not initialise anything; it makes Taichi's decorators quick (kernel modules import
 it first: :func:`_quick_class_check`).
+
+Every kernel is declared ``@ti.kernel(fastcache=True)``: gstaichi then finds a compiled kernel from
+a hash of its source and arguments, without running the front end that turns the kernel's Python
+AST into IR (Taichi 1.7 ran it in every process to compute its cache key: most of a cold job's
+extra time; docs/benchmarks.md, "Cold start"). That hash covers the kernel and the functions it
+calls, not the module constants they read, so :func:`_source_keyed_fast_cache` keeps that index
+per version of the engine's source.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import hashlib
 import io
 import linecache
+import os
 import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import taichi as ti  # engine/__init__.py has set Taichi's environment: no version check, no banner
+import gstaichi as ti  # engine/__init__.py has set its environment: no banner on stdout
 
 from .geometry.cache import cache_root
 
@@ -39,7 +49,7 @@ _current: RuntimeInfo | None = None
 
 def default_cache_dir() -> Path:
     """Taichi's offline kernel cache, under the engine's cache root."""
-    return cache_root() / "taichi"
+    return cache_root() / "gstaichi"
 
 
 def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path | None = None) -> RuntimeInfo:
@@ -69,6 +79,7 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
     if arch == "auto":
         arch = "cuda" if cuda_driver_present() else "cpu"
     _plain_source_positions()
+    _source_keyed_fast_cache()
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(
             arch=ti.cpu if arch == "cpu" else ti.cuda,
@@ -94,7 +105,7 @@ def _quick_class_check() -> None:
     itself is ``linecache``'s, the same cache ``getframeinfo`` ends in, so the answer is the same.
     A Taichi without this helper keeps its own.
     """
-    from taichi.lang import kernel_impl
+    from gstaichi.lang import kernel_impl
 
     patterns = getattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES", None)
     if patterns is None or not hasattr(kernel_impl, "_inside_class") or getattr(kernel_impl, "_quick_class", False):
@@ -118,15 +129,16 @@ _quick_class_check()
 def _plain_source_positions() -> None:
     """Make Taichi's front end record a kernel statement's position as file, line and source line.
 
-    Taichi 1.7 formats every statement's position eagerly while it turns a kernel's Python AST into
-    its IR, which happens in every process even when the offline cache holds the compiled kernel:
-    line-wrapped source with a caret line under the statement's columns, made by ``textwrap``. That
-    formatting was a third of a cold job's extra time (the bundled cantilever: first job 4.5 s,
-    3.25 s without it, the next jobs 0.6-0.7 s; docs/benchmarks.md, "Cold start"). The plain form
-    keeps what a compile error needs to name the statement. The cache key does not depend on it
-    (the cached kernels load unchanged). A Taichi without this method keeps its own formatting.
+    Taichi formats every statement's position eagerly while it turns a kernel's Python AST into its
+    IR: line-wrapped source with a caret line under the statement's columns, made by ``textwrap``.
+    Taichi 1.7 did that in every process, even when the offline cache held the compiled kernel, and
+    the formatting was a third of a cold job's extra time (the bundled cantilever: first job 4.5 s,
+    3.25 s without it, the next jobs 0.6-0.7 s; docs/benchmarks.md, "Cold start"); gstaichi does it
+    where its fast cache has no entry (a new kernel, a changed engine). The plain form keeps what a
+    compile error needs to name the statement. The cache key does not depend on it (the cached
+    kernels load unchanged). A Taichi without this method keeps its own formatting.
     """
-    from taichi.lang.ast import ast_transformer_utils
+    from gstaichi.lang.ast import ast_transformer_utils
 
     context = getattr(ast_transformer_utils, "ASTTransformerContext", None)
     if context is None or not hasattr(context, "get_pos_info") or getattr(context, "_plain_positions", False):
@@ -138,6 +150,59 @@ def _plain_source_positions() -> None:
 
     context.get_pos_info = get_pos_info
     context._plain_positions = True
+
+
+def _source_keyed_fast_cache() -> None:
+    """Keep gstaichi's fast-cache index (source hash -> compiled kernel) in a folder named after a
+    hash of every engine source file.
+
+    The fast cache's key hashes a kernel's own source, the functions it calls and its arguments, but
+    not the module constants it reads (``B``, ``TILE``, the static tables): a changed constant would
+    load the kernel compiled with the old one. A new folder per source version makes any change to
+    the engine run the front end once per kernel again (what every process did before); the
+    compiled kernels themselves stay in the shared offline cache, keyed by their IR, so an unchanged
+    kernel is not compiled again. Hashing the ~75 files costs about a millisecond. A build without
+    this index keeps its own.
+    """
+    try:
+        from gstaichi.lang._fast_caching import python_side_cache, src_hasher
+    except ImportError:
+        return
+    if getattr(src_hasher, "_engine_keyed", False):
+        return
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(path.read_bytes())
+    version = digest.hexdigest()[:16]
+
+    class EngineKeyed(python_side_cache.PythonSideCache):
+        def __init__(self) -> None:
+            super().__init__()
+            self.cache_folder = os.path.join(self.cache_folder, version)
+            os.makedirs(self.cache_folder, exist_ok=True)
+
+    src_hasher.PythonSideCache = EngineKeyed
+    src_hasher._engine_keyed = True
+    # gstaichi warns at each module constant a fast-cached kernel reads; the folder's name covers
+    # them, so the warning asks nothing of a user
+    warnings.filterwarnings("ignore", message=r"\[PURE\.VIOLATION\]", category=UserWarning)
+
+
+def save_kernel_cache() -> None:
+    """Write the kernels compiled so far to the offline cache now, not only at a normal exit.
+
+    A service worker stopped by a limit or a cancellation would otherwise lose what its jobs
+    compiled, and its replacement would compile it again inside the next job. Costs ~25 ms after a
+    process's first job, nothing measurable after (the bundled cantilever). No-op before :func:`init`.
+    """
+    if _current is None:
+        return
+    try:
+        ti.lang.impl.get_runtime().prog.dump_cache_data_to_disk()
+    except Exception:  # a full disk, a read-only cache: the kernels compile again next time, no more
+        pass
 
 
 def cuda_driver_present() -> bool:

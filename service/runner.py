@@ -76,16 +76,15 @@ def worker_main(conn: Connection, arch: str, precision: str, cache_dir: str, nic
     _die_with_parent()
     # Ctrl-C in a terminal reaches the whole process group; the server stops its workers itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
     if nice:
         try:
             os.nice(nice)
         except OSError:
             pass
     try:
-        from engine.runtime import init
+        from engine.runtime import init, save_kernel_cache
 
-        info = init(arch, precision, cache_dir=Path(cache_dir) / "taichi")
+        info = init(arch, precision, cache_dir=Path(cache_dir) / "gstaichi")
     except BaseException as exc:  # an unusable backend: say so instead of dying silently
         conn.send(("init_error", f"{type(exc).__name__}: {exc}"))
         return
@@ -97,7 +96,9 @@ def worker_main(conn: Connection, arch: str, precision: str, cache_dir: str, nic
             return
         if task is None:
             return
-        conn.send(run_task(task, _Reporter(conn)))
+        outcome = run_task(task, _Reporter(conn))
+        save_kernel_cache()  # before the answer: a worker stopped after it keeps what it compiled
+        conn.send(outcome)
 
 
 class _Reporter:

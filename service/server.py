@@ -55,7 +55,6 @@ def serve(host: str | None = None, port: int | None = None, log_level: str = "in
 
     from .api.app import create_app
 
-    os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
     settings = Settings()
     host = host or settings.host
     port = settings.port if port is None else port

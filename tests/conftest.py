@@ -1,13 +1,9 @@
-import os
 
 import numpy as np
 import pytest
 import trimesh
 
 from engine.geometry.surface import Surface
-
-# Keep Taichi's offline cache inside the test session's reach and quiet.
-os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
 
 def surface_of(mesh: trimesh.Trimesh) -> Surface:

@@ -87,7 +87,7 @@ class Server:
     def env(self) -> dict[str, str]:
         env = dict(os.environ)
         env.update({"VOXELASTIC_DATA_DIR": str(self.data_dir), "VOXELASTIC_CACHE_DIR": self.cache_dir,
-                    "TI_SKIP_VERSION_CHECK": "ON", "PYTHONUNBUFFERED": "1"})
+                    "PYTHONUNBUFFERED": "1"})
         env.update({f"VOXELASTIC_{k.upper()}": v for k, v in self.settings.items()})
         if self.token:
             env["VOXELASTIC_TOKENS"] = self.token

@@ -6,7 +6,6 @@ outside the solid named in a warning, no note about STL's merged corners."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
 import subprocess
@@ -21,12 +20,11 @@ from engine.output import read_result
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "cantilever.json"
 STL = ROOT / "examples" / "cantilever.stl"
-ENV = {**os.environ, "TI_SKIP_VERSION_CHECK": "ON"}
 
 
 def cli(*args, cwd=None, timeout=300):
     return subprocess.run([sys.executable, "-m", "engine.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=timeout, env=ENV)
+                          cwd=cwd, timeout=timeout)
 
 
 def job(tmp_path: Path, **changes) -> Path:
@@ -89,7 +87,7 @@ def test_ctrl_c_is_one_line_exit_130_and_no_temporary_files(tmp_path):
     # a pytest started in the background (`... &` in a script) has SIGINT ignored, and the child would
     # inherit that: the CLI gets the disposition a terminal gives it
     proc = subprocess.Popen([sys.executable, "-m", "engine.cli", "run", str(long), "-o", str(out / "r.h5"),
-                             "--no-cache"], stderr=subprocess.PIPE, text=True, env=ENV,
+                             "--no-cache"], stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = []
     for line in proc.stderr:  # until the solve runs

@@ -148,7 +148,7 @@ def test_module_check_and_leaf_package() -> None:
     )
     assert leaf.returncode == 0, leaf.stderr
     loaded = set(json.loads(leaf.stdout.replace("'", '"')))
-    assert "schemas" in loaded and not loaded & {"engine", "service", "taichi"}
+    assert "schemas" in loaded and not loaded & {"engine", "service", "gstaichi"}
 
 
 # --- valid specs --------------------------------------------------------------------------------

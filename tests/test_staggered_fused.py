@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 import pytest
-import taichi as ti
+import gstaichi as ti
 import trimesh
 
 from engine.boundary import Prescribed

@@ -4,7 +4,7 @@ import functools
 import itertools
 
 import numpy as np
-import taichi as ti
+import gstaichi as ti
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla

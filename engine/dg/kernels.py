@@ -7,7 +7,7 @@ components are unrolled (``ti.static``), loops over basis functions are not (unr
 well made the kernels compile for minutes). All arrays are float64 whatever the runtime's default.
 """
 
-import taichi as ti
+import gstaichi as ti
 
 from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 
@@ -27,7 +27,7 @@ def delta(p, q) -> F64:
     return 1.0 if p == q else 0.0
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def element_blocks(D: ND5, mu: F64, lam: F64, out: ND3):
     """out[b] = int_K eps(v) : C : eps(u) from D[b, a, c, I, J] = int_K d_a psi_I d_c psi_J dV.
 
@@ -49,7 +49,7 @@ def traction(N: ti.template(), b, X, Y, I, J, p, q, axis, mu: F64, lam: F64) -> 
             + lam * delta(p, axis) * N[b, X, Y, q, I, J])
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def face_blocks(M: ND5, P: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_minus: F64,
                 w_plus: F64, out: ND4):
     """Interface blocks out[f, c] of the side pairs (X, Y) = (0, 0), (1, 1), (0, 1) for c = 0, 1, 2 (X: test
@@ -88,7 +88,7 @@ def face_blocks(M: ND5, P: ND5, N: ND6, axis: NI1, eta: ND1, mu: F64, lam: F64, 
                         out[f, c, p * nb + I, q * nb + J] = w_pen * pen + cons
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def nitsche_blocks(M: ND5, P: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F64, w_pen: F64, w_cons: F64,
                    out: ND3):
     """Weak Dirichlet blocks on a surface patch (u- = g, v- = 0, sigma- = sigma+; eq. 21).
@@ -115,7 +115,7 @@ def nitsche_blocks(M: ND5, P: ND5, Nn: ND5, mask: ND2, eta: ND1, mu: F64, lam: F
                                                   + w_pen * mask[b, p] * mask[b, q] * pen)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def add_blocks(data: ND3, slots: NL1, blocks: ND3, pick: NL1, transpose: ti.i32):
     """data[slots[k]] += blocks[pick[k]] (transposed when ``transpose``) for every k; the slots are
     distinct within one call, so the adds need no atomics (one read and one write of each entry:
@@ -135,7 +135,7 @@ def add_blocks(data: ND3, slots: NL1, blocks: ND3, pick: NL1, transpose: ti.i32)
                     data[dst, i, j] = data[dst, i, j] + blocks[src, i, j]
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def rotate_blocks(blocks: ND3, left: NI1, right: NI1, R: ND3, out: ND3):
     """out[b] = R_left[b] blocks[b] R_right[b]^T with the 3x3 rotations acting on components.
 

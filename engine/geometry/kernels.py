@@ -13,7 +13,7 @@ to the plane so that neighbouring sub-cells partition each facet without gaps.
 """
 
 
-import taichi as ti
+import gstaichi as ti
 
 from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 
@@ -64,7 +64,7 @@ def slab_range(lo: ti.f64, hi: ti.f64, lower: ti.i32, upper: ti.i32):
     return ti.max(k0, lower), ti.min(k1, upper)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def scan_triangles(
     tri: ti.types.ndarray(dtype=ti.f64, ndim=3),
     x0: ti.i32,
@@ -112,7 +112,7 @@ def scan_column(a: ti.template(), na: ti.i32, ix: ti.i32, volume: ti.template(),
                     cover[ix, j, k] += area
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def scan_segments(
     seg: ti.types.ndarray(dtype=ti.f64, ndim=3),
     x0: ti.i32,
@@ -296,7 +296,7 @@ def cap_winding(cap: ti.template(), p: ti.template(), dim: ti.template()) -> ti.
     return w
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def bound_cap_winding(
     cap: ti.types.ndarray(dtype=ti.f64, ndim=3),
     edges: ti.types.ndarray(dtype=ti.f64, ndim=3),
@@ -389,7 +389,7 @@ def ray_count(
     return count
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def sample_open_winding(
     closed: ti.types.ndarray(dtype=ti.f64, ndim=3),
     start: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -408,7 +408,7 @@ def sample_open_winding(
         out[i] = ray_count(closed, start, ids, column[i], p, dim) - cap_winding(cap, p, dim)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def probe_open_winding(
     closed: ti.types.ndarray(dtype=ti.f64, ndim=3),
     surface_facets: ti.i32,

@@ -86,7 +86,8 @@ class CurlSmoother:
         ``smoother_kernels``) with x, step and the Chebyshev coefficients c1, c2."""
         lv = self.level
         smoother_kernels.curl_residual(lv.dim, self.n, lv.nbr, r, self.inv_theta, self.t)
-        smoother_kernels.hybrid_step(lv.dim, mode, self.n, lv.nbr, lv.dinv, lv.mask, r, self.t, x, step, c1, c2)
+        smoother_kernels.hybrid_step(lv.dim, mode, self.n, lv.nbr, lv.dinv, lv.mask, r, self.t, x, step,
+                                     float(c1), float(c2))  # numpy scalars defeat the launcher's argument cache
 
     @property
     def bytes(self) -> int:

@@ -17,7 +17,7 @@ serves f64 and f32 arrays (``solver.precision`` f32) without a precision warning
 
 import itertools
 
-import taichi as ti
+import gstaichi as ti
 
 from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 from ..grid import axis_pairs
@@ -103,7 +103,7 @@ def face_neighbours(d: ti.template(), nbr: ti.types.ndarray(), t: ti.i32, p: ti.
     return up, down
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def weighted_stresses(d: ti.template(), listed: ti.template(), pos: ti.types.ndarray(), n: ti.i32,
                       nbr: ti.types.ndarray(), full: ti.types.ndarray(), u: ti.types.ndarray(),
                       vc: ti.types.ndarray(), ve: ti.types.ndarray(), lam: float, mu: float, inv_h: float,
@@ -141,7 +141,7 @@ def weighted_stresses(d: ti.template(), listed: ti.template(), pos: ti.types.nda
 APPLY, RESIDUAL, CHEBYSHEV, PRECONDITIONED = 0, 1, 2, 3
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template(), pos: ti.types.ndarray(),
                       n: ti.i32, nbr: ti.types.ndarray(), mask: ti.types.ndarray(), sc: ti.types.ndarray(),
                       se: ti.types.ndarray(), scale: float, x: ti.types.ndarray(), m: ti.types.ndarray(),
@@ -186,7 +186,7 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
                 x[a, p] = stored(x, x[a, p] + s)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def inverse_diagonal(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
                      mask: ti.types.ndarray(), vc: ti.types.ndarray(), ve: ti.types.ndarray(),
                      lam: float, mu: float, scale: float, m: ti.types.ndarray(), shift: float,
@@ -210,7 +210,7 @@ def inverse_diagonal(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.type
             dinv[a, p] = stored(dinv, inv)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def active_faces(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
                  vc: ti.types.ndarray(), active: ti.types.ndarray()):
     """active[a, p] = 1 where a cell on either side of the face holds material."""
@@ -222,7 +222,7 @@ def active_faces(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.nd
             active[a, p] = ti.select(vc[p] + vc[address(d, tmap, I - unit(d, a), nt)] > 0, 1, 0)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def prune_edges(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
                 active: ti.types.ndarray(), ve: ti.types.ndarray()):
     """Zero the edge weights whose shear stencil reaches an inactive face: such a face would be
@@ -242,7 +242,7 @@ def prune_edges(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.nda
                 ve[q, p] = 0.0
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def coarse_fractions(d: ti.template(), coords: ti.types.ndarray(), tmap: ti.types.ndarray(),
                      fine_tmap: ti.types.ndarray(), fine_zero: ti.i32, fine_vc: ti.types.ndarray(),
                      vc: ti.types.ndarray(), ve: ti.types.ndarray(), vf: ti.types.ndarray()):
@@ -324,7 +324,7 @@ def parent_address(d: ti.template(), parents: ti.types.ndarray(), coords: ti.typ
     return parents[t, code] * (B**d) + l
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def prolong_add(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(), parents: ti.types.ndarray(),
                 mask: ti.types.ndarray(), coarse: ti.types.ndarray(), x: ti.types.ndarray()):
     """x += mask P coarse (P: the interpolation ``kind``, LINEAR or FACE, of each component on its
@@ -341,7 +341,7 @@ def prolong_add(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(
             x[a, p] = stored(x, x[a, p] + mask[a, p] * v)  # a plain store: no atomic, each p has one writer
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def restrict_add(d: ti.template(), kind: ti.template(), dtype: ti.template(), coords: ti.types.ndarray(),
                  parents: ti.types.ndarray(), zero: ti.i32, fine: ti.types.ndarray(), out: ti.types.ndarray()):
     """out += P^T fine, scattered from the fine DOFs with the prolongation's own weights (so the
@@ -386,7 +386,7 @@ def _restriction_weight(a: int, g: tuple[int, ...], kind: int) -> float:
     return w
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def restrict(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(), children: ti.types.ndarray(),
              mask: ti.types.ndarray(), fine: ti.types.ndarray(), out: ti.types.ndarray()):
     """out = mask P^T fine at every kept coarse position (``coords`` the coarse tiles; ``children``
@@ -423,7 +423,7 @@ def restrict(d: ti.template(), kind: ti.template(), coords: ti.types.ndarray(), 
             out[a, p] = stored(out, mask[a, p] * v)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def chebyshev_start(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndarray(), dinv: ti.types.ndarray(),
                     b: ti.types.ndarray(), c: float):
     """step = x = c D^-1 b: the first Chebyshev step from x = 0 (needs no A x)."""
@@ -434,7 +434,7 @@ def chebyshev_start(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndar
             x[a, p] = stored(x, s)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def random_fill(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray(), seed: ti.u32):
     """x = m * (a hash of (component, position, seed) in [0, 1)): a reproducible random vector made
     where it lives (the power iteration's start), independent of threads and of the backend."""
@@ -449,7 +449,7 @@ def random_fill(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray(), 
             x[a, p] = stored(x, m[a, p] * (ti.cast(k, ti.f64) / 4294967296.0))
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def scaled(d: ti.template(), x: ti.types.ndarray(), s: ti.types.ndarray(), omega: float, out: ti.types.ndarray()):
     """out = omega s x (elementwise)."""
     for p in range(x.shape[1]):
@@ -457,7 +457,7 @@ def scaled(d: ti.template(), x: ti.types.ndarray(), s: ti.types.ndarray(), omega
             out[a, p] = stored(out, omega * s[a, p] * x[a, p])
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def dot(d: ti.template(), x: ti.types.ndarray(), y: ti.types.ndarray()) -> ti.f64:
     s = ti.cast(0.0, ti.f64)
     for p in range(x.shape[1]):
@@ -466,7 +466,7 @@ def dot(d: ti.template(), x: ti.types.ndarray(), y: ti.types.ndarray()) -> ti.f6
     return s
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def axpy(d: ti.template(), alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.ndarray()):
     """y += alpha x."""
     for p in range(x.shape[1]):
@@ -474,7 +474,7 @@ def axpy(d: ti.template(), alpha: ti.f64, x: ti.types.ndarray(), y: ti.types.nda
             y[a, p] = stored(y, y[a, p] + alpha * x[a, p])
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def xpby(d: ti.template(), x: ti.types.ndarray(), beta: ti.f64, y: ti.types.ndarray()):
     """y = x + beta y."""
     for p in range(x.shape[1]):
@@ -482,21 +482,21 @@ def xpby(d: ti.template(), x: ti.types.ndarray(), beta: ti.f64, y: ti.types.ndar
             y[a, p] = stored(y, x[a, p] + beta * y[a, p])
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def copy(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     for p in range(src.shape[1]):
         for a in ti.static(range(d)):
             dst[a, p] = stored(dst, src[a, p])
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def fill(d: ti.template(), x: ti.types.ndarray(), value: float):
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
             x[a, p] = stored(x, value)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def count_nonfinite(d: ti.template(), x: ti.types.ndarray()) -> ti.i32:
     bad = 0
     for p in range(x.shape[1]):
@@ -506,14 +506,14 @@ def count_nonfinite(d: ti.template(), x: ti.types.ndarray()) -> ti.i32:
     return bad
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def gather(x: ti.types.ndarray(), comp: ti.types.ndarray(), pos: ti.types.ndarray(), z: ti.types.ndarray()):
     """z[k] = x[comp[k], pos[k]]: the DOFs a surface operator touches, in its compact order."""
     for k in range(comp.shape[0]):
         z[k] = x[comp[k], pos[k]]
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def csr_apply(indptr: ti.types.ndarray(), cols: ti.types.ndarray(), vals: ti.types.ndarray(),
               src: ti.types.ndarray(), dst: ti.types.ndarray(), offset: ti.i32):
     """dst[offset + i] = sum_k vals[k] src[cols[k]] over row i of a CSR matrix (a gather: no atomics;
@@ -525,7 +525,7 @@ def csr_apply(indptr: ti.types.ndarray(), cols: ti.types.ndarray(), vals: ti.typ
         dst[offset + i] = acc
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def surface_add(mode: ti.template(), slots: ti.types.ndarray(), n: ti.i32, comp: ti.types.ndarray(),
                 pos: ti.types.ndarray(), sx: ti.types.ndarray(), mask: ti.types.ndarray(), dinv: ti.types.ndarray(),
                 c2: float, step: ti.types.ndarray(), x: ti.types.ndarray(), y: ti.types.ndarray()):

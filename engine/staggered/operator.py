@@ -196,6 +196,7 @@ class Level:
         d = self.dim
         listed = part is not None
         surface = self.surface is not None
+        c1, c2 = float(c1), float(c2)  # numpy scalars would defeat the kernel launcher's argument cache
         if surface:
             self._surface_apply(x)  # before the divergence: PRECONDITIONED may overwrite x
         kernels.stress_divergence(d, mode, listed, part.update if listed else self._unlisted,

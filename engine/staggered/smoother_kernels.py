@@ -12,7 +12,7 @@ divergence-free in every cell; Theta = diag(C^T A C). Arrays: per-component [d, 
 
 import itertools
 
-import taichi as ti
+import gstaichi as ti
 
 from .. import runtime  # noqa: F401 - first: its Taichi patches make the decorators below quick
 from ..grid import axis_pairs
@@ -111,7 +111,7 @@ def block(d: ti.template(), nbr: ti.types.ndarray(), p: ti.i32):
     return out
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def curl_diagonal(d: ti.template(), n: ti.i32, nbr: ti.types.ndarray(), vc: ti.types.ndarray(),
                   ve: ti.types.ndarray(), mask: ti.types.ndarray(), mass: ti.types.ndarray(), shift: float,
                   lam: float, mu: float, scale: float, theta: ti.types.ndarray()):
@@ -147,7 +147,7 @@ def curl_diagonal(d: ti.template(), n: ti.i32, nbr: ti.types.ndarray(), vc: ti.t
             theta[q, p] = stored(theta, total)
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def curl_residual(d: ti.template(), n: ti.i32, nbr: ti.types.ndarray(), r: ti.types.ndarray(),
                   inv_theta: ti.types.ndarray(), t: ti.types.ndarray()):
     """t[q, p] = inv_theta[q, p] c^T r for pair q's edge at each of the n kept positions."""
@@ -159,7 +159,7 @@ def curl_residual(d: ti.template(), n: ti.i32, nbr: ti.types.ndarray(), r: ti.ty
             t[q, p] = stored(t, inv_theta[q, p] * (r[a, p] - r[a, down[b]] - r[b, p] + r[b, down[a]]))
 
 
-@ti.kernel
+@ti.kernel(fastcache=True)
 def hybrid_step(d: ti.template(), mode: ti.i32, n: ti.i32, nbr: ti.types.ndarray(), dinv: ti.types.ndarray(),
                 mask: ti.types.ndarray(), r: ti.types.ndarray(), t: ti.types.ndarray(), x: ti.types.ndarray(),
                 step: ti.types.ndarray(), c1: float, c2: float):
