@@ -62,9 +62,10 @@ PEERS = ("p1", "p2", "p1-stl", "p2-stl")
 CAD_PEERS = ("p1", "p2")
 
 
-def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
+def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = True) -> None:
     from verification.problems import problem
     from engine import simulate
+    from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
 
     p = problem(problem_name)
@@ -87,15 +88,21 @@ def _voxelastic(problem_name: str, method: str, h: float, queue) -> None:
                 "residual": result.solver.residual, "stages": result.solver.stage_times,
                 "warnings": result.solver.warnings}
 
-    queue.put(_cold_and_warm(p, problem_name, method, h, job))
+    try:
+        record = _cold_and_warm(p, problem_name, method, h, job, warm)
+    except VoxelasticError as exc:  # refused (the memory estimate, a limit): a row that says why
+        record = {"problem": problem_name, "method": method, "h": h, "failed": f"{type(exc).__name__}: {exc}"}
+    queue.put(record)
 
 
-def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[], dict]) -> dict:
+def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[], dict], twice: bool = True) -> dict:
     """The record of one configuration: ``job()`` run twice in this process, the second (warm) run's
-    errors and times, the first one's time as ``seconds_cold``."""
+    errors and times, the first one's time as ``seconds_cold``; with ``twice`` False one cold run,
+    whose time is both."""
     from verification.problems import relative_l2
 
-    cold, warm = job(), job()
+    cold = job()
+    warm = job() if twice else dict(cold)
     u = np.asarray(warm.pop("displacement"))
     vm = np.asarray(warm.pop("von_mises"))
     scale = float(np.abs(u).max()) or 1.0
@@ -106,7 +113,7 @@ def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[]
             "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes))}
 
 
-def _peer(problem_name: str, method: str, h: float, queue) -> None:
+def _peer(problem_name: str, method: str, h: float, queue, warm: bool = True) -> None:
     from benchmarks.peer import run_peer
     from verification.problems import problem
 
@@ -119,31 +126,54 @@ def _peer(problem_name: str, method: str, h: float, queue) -> None:
         out = run_peer(problem_name, order, h, geometry=geometry)
         return {k: v for k, v in out.items() if k not in ("error_u", "error_vm", "problem", "method", "h")}
 
-    queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job))
+    queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job, warm))
 
 
-def _one(problem_name: str, method: str, h: float, timeout: float) -> dict:
+def _one(problem_name: str, method: str, h: float, timeout: float, warm: bool = True,
+         max_rss_gib: float | None = None) -> dict:
+    """One configuration in its own spawned process: cold and (with ``warm``) warm job. A crash, a
+    timeout or (with ``max_rss_gib``) a process whose resident memory passes that many GiB -- it is
+    killed then -- is a row with ``failed`` saying which."""
+    import psutil
+
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     target = _peer if method in PEERS else _voxelastic
-    proc = ctx.Process(target=target, args=(problem_name, method, h, q))
+    proc = ctx.Process(target=target, args=(problem_name, method, h, q, warm))
     t0 = time.perf_counter()
     proc.start()
-    row = None
+    watched = psutil.Process(proc.pid)
+    row, why = None, None
     while row is None and time.perf_counter() - t0 < timeout:
         try:
             row = q.get(timeout=1.0)
         except queue.Empty:
             if not proc.is_alive() and q.empty():
                 break
+            if max_rss_gib is not None and _rss_gib(watched) > max_rss_gib:
+                why = f"killed above {max_rss_gib:g} GiB resident"
+                proc.kill()
+                break
     if row is None:  # a crash or a timeout is a row of the table, not an abort
-        why = f"exit code {proc.exitcode}" if proc.exitcode is not None else f"timed out after {timeout:g} s"
+        if why is None:
+            why = f"exit code {proc.exitcode}" if proc.exitcode is not None else f"timed out after {timeout:g} s"
         row = {"problem": problem_name, "method": method, "h": h, "failed": why}
     proc.join(timeout=10)
     if proc.is_alive():
         proc.kill()
     row["process_s"] = time.perf_counter() - t0
     return row
+
+
+def _rss_gib(process) -> float:
+    """Resident memory [GiB] of ``process`` and its children (0 once it is gone)."""
+    import psutil
+
+    try:
+        procs = [process, *process.children(recursive=True)]
+        return sum(p.memory_info().rss for p in procs) / 2**30
+    except psutil.Error:
+        return 0.0
 
 
 def medians(runs: list[dict]) -> list[dict]:
