@@ -11,7 +11,8 @@ most 2x per step. A chain stops at the first run that does not fit: over the bud
 above the memory (the process and its children killed when their resident memory passes
 --memory-gib), refused by voxelastic's memory estimate (``VOXELASTIC_MAX_MEMORY_GB`` is set to the
 same budget, so a refusal is the estimate's verdict, which may be conservative), or any other
-failure; the row says which. The table gives, per problem and method, the finest run that fit:
+failure; the row says which. A failed step longer than 1.44x is tried once more at its geometric
+mean with the last size that fit. The table gives, per problem and method, the finest run that fit:
 its h, relative L2 error of u at the probes, seconds and peak resident memory, and the run that
 stopped the chain.
 """
@@ -50,7 +51,8 @@ def chain(problem: str, method: str, budget: float, memory_gib: float) -> tuple[
     ended the chain."""
     sizes = SIZES[problem][method][-2:]
     runs: list[dict] = []
-    h: float | None = sizes[0]
+    h: float = sizes[0]
+    bisected = False
     while True:
         row = _one(problem, method, h, budget + 60.0, warm=False, max_rss_gib=memory_gib)
         if "failed" not in row and row["seconds"] > budget:
@@ -59,12 +61,17 @@ def chain(problem: str, method: str, budget: float, memory_gib: float) -> tuple[
         brief = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()
                  if k in ("problem", "method", "h", "seconds", "error_u", "peak_rss_gib", "failed")}
         print(json.dumps(brief), flush=True)
-        if "failed" in row:
-            return runs, f"h = {h:.4g}: {row['failed']}"
         fitting = [r for r in runs if "failed" not in r]
-        h = sizes[1] if len(fitting) == 1 else next_size(fitting, budget)
-        if h is None:
+        if "failed" in row:
+            last = fitting[-1]["h"] if fitting else None
+            if last is None or bisected or last / h < REFINE[0] ** 2:
+                return runs, f"h = {h:.4g}: {row['failed']}"
+            h, bisected = math.sqrt(last * h), True  # once per chain: the step may have been too long
+            continue
+        step = sizes[1] if len(fitting) == 1 else next_size(fitting, budget)
+        if step is None:
             return runs, f"the next size refined {REFINE[0]:g}x would take over {budget:g} s (extrapolated)"
+        h = step
 
 
 def table(runs: list[dict], stops: dict[tuple[str, str], str]) -> str:
