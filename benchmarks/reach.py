@@ -35,8 +35,8 @@ REFINE = (1.2, 2.0)  # least and most refinement of h per step
 
 def next_size(runs: list[dict], budget: float) -> float | None:
     """The next (smaller) h of a chain from its last two fitting runs: the size whose extrapolated time
-    is FIRST_TARGET * budget, refined within REFINE; None when the last run is within 1/REFINE[0] of
-    that target already (the next step would not fit)."""
+    is FIRST_TARGET * budget, refined within REFINE; None when even the least refinement REFINE[0] is
+    extrapolated to take over the budget."""
     (h0, t0), (h1, t1) = [(r["h"], r["seconds"]) for r in runs[-2:]]
     p = math.log(t1 / t0) / math.log(h0 / h1) if t1 > t0 and h0 > h1 else 3.0
     p = max(p, 1.0)  # noise in two small runs must not promise a free refinement
@@ -75,8 +75,9 @@ def chain(problem: str, method: str, budget: float, memory_gib: float) -> tuple[
 
 
 def table(runs: list[dict], stops: dict[tuple[str, str], str]) -> str:
-    """Markdown: per problem and method, the finest run within the budget and what ended the chain."""
-    lines = ["| problem | method | finest h that fit | error of u | seconds (cold) | peak [GiB] | stopped by |",
+    """Markdown: per problem and method, the run of smallest error within the budget and what ended the
+    chain."""
+    lines = ["| problem | method | h of the smallest error | error of u | seconds (cold) | peak [GiB] | stopped by |",
              "|---|---|---|---|---|---|---|"]
     for key in dict.fromkeys((r["problem"], r["method"]) for r in runs):
         mine = [r for r in runs if (r["problem"], r["method"]) == key]
