@@ -47,10 +47,11 @@ def test_a_tip_moved_through_its_cell_follows_beam_theory():
 
 
 def test_sixteen_sub_cell_offsets_move_the_tip_by_less_than_3_percent():
-    """The stress suite's offsets row at W / 8 (corner at s h (1, 0.6, 0.3)): measured 2.78% (7.14%
-    before the ghost samples). Not the < 2% the boundary issue asks: what is left comes from partial
-    cell layers along the load (their strain read at the cell centre stiffens bending; 4.55% over
-    offsets along the load alone) and from a clamp face inside a cell (docs/benchmarks.md)."""
+    """The stress suite's offsets row at W / 8 (corner at s h (1, 0.6, 0.3)): measured 2.71% (2.78% before
+    every body's load got its moment couple, 7.14% before the ghost samples). Not the < 2% the boundary
+    issue asks: what is left comes from partial cell layers along the load (their strain read at the
+    cell centre stiffens bending; 4.7% over offsets along the load alone) and from a clamp face inside
+    a cell (1.5% along the axis alone; docs/benchmarks.md)."""
     h = S.cell_size("staggered", SIZE)
     grid = P.offset_grid((round(P.LENGTH / h), CELLS, CELLS), h)
     assert spread(tips([P.offset_bar(s, h) for s in P.OFFSETS], grid)) < 0.03

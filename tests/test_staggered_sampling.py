@@ -251,7 +251,7 @@ def test_loads_on_free_rotated_bodies_keep_the_quadratures_force_and_moment(d):
     active = activity(surface, grid)
     split = 1.0  # the bodies lie on either side of x = 1.0
 
-    def free(a, index):
+    def bodies(a, index):
         return np.where(active(a, index), 1 + (grid.sample_points(index, np.eye(d)[a])[:, 0] > split), 0)
 
     # pressure -1 Pa: the traction is the unit outward normal
@@ -268,14 +268,14 @@ def test_loads_on_free_rotated_bodies_keep_the_quadratures_force_and_moment(d):
         np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
         assert np.abs(moment - want_moment).max() > 1e-4 * scale * grid.spacing
         # ... the couple on a free body restores it, each body's for itself
-        loads = surface_loads(grid, points, weights, np.where(body[:, None], tractions, 0.0), active, free=free)
+        loads = surface_loads(grid, points, weights, np.where(body[:, None], tractions, 0.0), active, bodies=bodies)
         force, moment = resultant(grid, loads)
         np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
         np.testing.assert_allclose(moment, want_moment, rtol=0, atol=2e-12 * scale)
         for a, (index, f) in enumerate(loads):
             assert active(a, index).all()
     # balanced on the surface (a pressure all around), balanced on the samples
-    loads = surface_loads(grid, points, weights, -2.5e3 * normals, active, free=free)
+    loads = surface_loads(grid, points, weights, -2.5e3 * normals, active, bodies=bodies)
     force, moment = resultant(grid, loads)
     total = 2.5e3 * weights.sum()
     assert np.abs(force).max() < 1e-12 * total and np.abs(moment).max() < 2e-12 * total
@@ -292,8 +292,8 @@ def test_a_symmetric_load_on_a_grid_aligned_face_gets_no_couple():
     active = activity(surface, grid)
     end = Halfspaces(np.array([[-1.0, 0.0, 0.0]]), np.array([-0.6]))  # x >= 0.6: side faces meet it in zero area
     points, weights, t = boundary_tractions(surface, end, grid.spacing, traction=[50.0, 0.0, 0.0], name="pull")
-    free = lambda a, index: active(a, index).astype(np.int64)  # noqa: E731
-    (index, f), *_ = surface_loads(grid, points, weights, t, active, free=free)
+    bodies = lambda a, index: active(a, index).astype(np.int64)  # noqa: E731
+    (index, f), *_ = surface_loads(grid, points, weights, t, active, bodies=bodies)
     (held_index, held_f), *_ = surface_loads(grid, points, weights, t, active)
     np.testing.assert_array_equal(index, held_index)
     np.testing.assert_array_equal(f, held_f)

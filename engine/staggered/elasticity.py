@@ -150,14 +150,15 @@ class StaggeredElasticity(StaggeredFields):
                 for k in range(d):
                     f[k] += (grid.spacing**d * g[k]) * (level.vf_host[k] * level.active[k])
         active = self._active_lookup
-        # a body held by nothing must be loaded in balance: its surface loads keep their moment
-        free = self._free_body_lookup()
+        # each body's surface loads keep their first moments (sampling: a held bar pulled off its
+        # axis bends; a body held by nothing must be loaded in balance)
+        bodies = self._body_lookup()
         for load in self.surface_loads:
             if load.form == "divergence":
                 f += self._divergence_load(load, points)
                 continue
             pts, w, t, _ = self._load_points[id(load)]
-            spread = sampling.surface_loads(grid, pts, w, t, active, free=free, name=load.name)
+            spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         if not np.all(np.isfinite(f)):
@@ -210,16 +211,11 @@ class StaggeredElasticity(StaggeredFields):
         pos = self.level.layout.positions(index)
         return (pos >= 0) & self.level.active[a, np.maximum(pos, 0)]
 
-    def _free_body_lookup(self) -> Callable[[int, np.ndarray], np.ndarray] | None:
-        """lookup(a, index [M, d]) -> int [M]: the body label of samples of bodies that no
-        displacement boundary holds at all, 0 elsewhere; None when there is no such body."""
-        held = np.unique(self.dof_body[self._surface_dofs()]) if self.surface_terms is not None else np.zeros(0, int)
-        loose = np.setdiff1d(np.unique(self.dof_body), np.append(held, 0))
-        if len(loose) == 0:
-            return None
+    def _body_lookup(self) -> Callable[[int, np.ndarray], np.ndarray]:
+        """lookup(a, index [M, d]) -> int [M]: the body label (1, 2, ...) of samples, 0 where no
+        unknown is."""
         labels = np.zeros((self.dim, self.level.size), dtype=np.int32)
-        on = np.isin(self.dof_body, loose)
-        labels[self.dof_comp[on], self.dof_pos[on]] = self.dof_body[on]
+        labels[self.dof_comp, self.dof_pos] = self.dof_body
         layout = self.level.layout
 
         def lookup(a: int, index: np.ndarray) -> np.ndarray:
