@@ -21,6 +21,10 @@ BALANCE_TOLERANCE = 1e-6
 PIN_TOLERANCE = 1e-10
 # Singular values below this (relative) mean the free modes are dependent on the body's DOFs.
 RANK_TOLERANCE = 1e-8
+# Singular values above this (relative) are resolved well by the modes' Gram matrix (its round-off
+# is ~1e-16 of the largest eigenvalue, so ~1e-8 of the largest singular value).
+GRAM_TOLERANCE = 1e-5
+ROWS = 1 << 16  # rows of an [n, k] array multiplied at once in place
 
 
 class UnbalancedLoadError(VoxelasticError):
@@ -32,13 +36,18 @@ def rigid_modes(points: np.ndarray, axis: np.ndarray, center: np.ndarray | None 
     ``axis`` [n] of each mode. Columns: d translations, then rotations in the planes (k, l), k < l,
     about ``center`` (default the centroid) with unit angle: u_k = -(x_l - c_l), u_l = x_k - c_k."""
     points = np.asarray(points, dtype=float)
-    d = points.shape[1]
+    n, d = points.shape
     c = points.mean(axis=0) if center is None else np.asarray(center, dtype=float)
-    x = points - c
-    cols = [(axis == k).astype(float) for k in range(d)]
-    for k, l in itertools.combinations(range(d), 2):
-        cols.append(np.where(axis == k, -x[:, l], 0.0) + np.where(axis == l, x[:, k], 0.0))
-    return np.stack(cols, axis=1)
+    planes = list(itertools.combinations(range(d), 2))
+    # filled column by column: a body of 20 M DOFs would hold a dozen [n] temporaries otherwise
+    out = np.zeros((n, d + len(planes)))
+    on = [np.nonzero(axis == k)[0] for k in range(d)]
+    for k in range(d):
+        out[on[k], k] = 1.0
+    for m, (k, l) in enumerate(planes, start=d):
+        out[on[k], m] = c[l] - points[on[k], l]
+        out[on[l], m] = points[on[l], k] - c[k]
+    return out
 
 
 def rigid_motions(points: np.ndarray, center: np.ndarray | None = None) -> np.ndarray:
@@ -90,14 +99,46 @@ def free_modes(points: np.ndarray, axis: np.ndarray, fixed: np.ndarray, body: np
         if loose.shape[1] == 0:
             continue
         free_dofs = np.arange(len(body))[on][~fixed[on]]
-        # the modes can be dependent on few DOFs (a rotation vanishes at a lone cell's faces): keep
-        # only the directions they really span
-        free_part = rigid_modes(points[free_dofs], axis[free_dofs], center) / norms
-        u, sv, _ = np.linalg.svd(free_part @ loose, full_matrices=False)
-        q = u[:, sv > RANK_TOLERANCE * max(1.0, float(sv.max(initial=0.0)))]
+        everything = len(free_dofs) == len(body)  # a free body alone: no copies of its points
+        free_part = rigid_modes(points if everything else points[free_dofs],
+                                axis if everything else axis[free_dofs], center)
+        free_part /= norms
+        q = _orthonormal(_times(free_part, loose))
         if q.shape[1]:
             out.append((free_dofs, q))
     return out
+
+
+def _orthonormal(a: np.ndarray) -> np.ndarray:
+    """An orthonormal basis [n, r] of the columns of a [n, k] (k small; ``a`` is overwritten),
+    dropping the directions whose singular value is below RANK_TOLERANCE of the largest: the modes
+    can be dependent on few DOFs (a rotation vanishes at a lone cell's faces). An SVD of the [n, k]
+    array holds ~3 such arrays at once (a free body of 20 M DOFs: ~3 GiB), so the usual case --
+    modes far from dependent -- goes by the k x k Gram matrix, twice (the first pass squares the
+    condition, the second restores orthonormality to round-off), in place. The Gram matrix
+    resolves singular values only down to ~1e-8 of the largest, so when one lies below
+    GRAM_TOLERANCE the SVD decides."""
+    w, v = np.linalg.eigh(a.T @ a)
+    s = np.sqrt(np.clip(w, 0.0, None))
+    top = max(1.0, float(s.max(initial=0.0)))
+    if np.any((s > 0) & (s < GRAM_TOLERANCE * top)):
+        u, sv, _ = np.linalg.svd(a, full_matrices=False)
+        return u[:, sv > RANK_TOLERANCE * max(1.0, float(sv.max(initial=0.0)))]
+    keep = s > RANK_TOLERANCE * top
+    q = _times(a, v[:, keep] / s[keep])
+    if q.shape[1]:
+        q = _times(q, np.linalg.inv(np.linalg.cholesky(q.T @ q)).T)
+    return q
+
+
+def _times(a: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """a @ m for a [n, k] and m [k, r], r <= k, written into a's first r columns (returned as a view)
+    a block of rows at a time: no second [n, k] array."""
+    r = m.shape[1]
+    for start in range(0, len(a), ROWS):
+        block = a[start:start + ROWS]
+        block[:, :r] = block @ m
+    return a[:, :r]
 
 
 def _held_gram(held: sp.spmatrix, points: np.ndarray, axis: np.ndarray, on, center: np.ndarray,
