@@ -41,6 +41,7 @@ PointFunction = Callable[[np.ndarray], np.ndarray]
 # Rows of a divergence-form load evaluated at once (its [rows, d, d] stress samples: ~19 MB each in 3D).
 CHUNK = 1 << 18
 
+
 @dataclass
 class StaggeredElasticity(StaggeredFields):
     """The method on one geometry: built once (level, prescribed DOFs, loads, rigid-mode checks,
@@ -175,8 +176,8 @@ class StaggeredElasticity(StaggeredFields):
         constant stress exactly, so the discrete traction and the discrete energy agree cell by
         cell. Only rows whose sample lies within h/2 of ``load.region`` get it, and of those only
         the ones where a fraction their terms weigh is below 1 (elsewhere the terms cancel): the
-        stress field is evaluated there alone, CHUNK rows at a time. (Over the whole index box, as
-        before, the ball's stress field at h = 1/128 held several [17 M, 3, 3] arrays at once.)"""
+        stress field is evaluated there alone, CHUNK rows at a time: over the whole index box, the
+        ball's stress field at h = 1/128 came as several [17 M, 3, 3] arrays at once."""
         level, grid, d, h = self.level, self.grid, self.dim, self.grid.spacing
         if load.pressure is not None:
             stress_field = lambda x: np.broadcast_to(-float(load.pressure) * np.eye(d), (len(x), d, d))  # noqa: E731
