@@ -155,8 +155,10 @@ class StaggeredElasticity(StaggeredFields):
                     f[k] += (grid.spacing**d * g[k]) * (level.vf_host[k] * level.active[k])
         active = self._active_lookup
         # each body's surface loads keep their first moments (sampling: a held bar pulled off its
-        # axis bends; a body held by nothing must be loaded in balance)
-        bodies = self._body_lookup()
+        # axis bends; a body held by nothing must be loaded in balance); the labels cost 4 bytes
+        # per sample, so only jobs with such loads make them
+        quadrature = any(load.form != "divergence" for load in self.surface_loads)
+        bodies = self._body_lookup() if quadrature else None
         for load in self.surface_loads:
             if load.form == "divergence":
                 self._divergence_load(load, points, f)
