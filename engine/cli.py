@@ -92,14 +92,14 @@ def _admit(spec, base_dir: Path):
                      max_cells=limits.max_cells)
     entry = method_entry(spec.method.kind)
     entry.check_dimension(spec.dimension)
-    _check_memory(grid, entry, spec.method, limits)
+    _check_memory(grid, entry, spec.method, limits, surface)
     return surface, grid
 
 
-def _check_memory(grid, entry, method_spec, limits) -> None:
+def _check_memory(grid, entry, method_spec, limits, surface) -> None:
     from .errors import GridError
 
-    need = entry.estimate_memory(grid, method_spec)
+    need = entry.estimate_memory(grid, method_spec, surface=surface)
     if need > limits.max_memory_bytes:
         raise GridError(
             f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{entry.kind}', "
@@ -210,7 +210,7 @@ def cmd_voxelize(args) -> int:
                          max_cells=limits.max_cells)
         # what runs here is the volume-fraction stage: the estimate of a method built on it
         entry = next(m for m in METHODS.values() if m.geometry == "fractions")
-        _check_memory(grid, entry, None, limits)
+        _check_memory(grid, entry, None, limits, surface)
         _check_room(args.output, grid.shape, [], vertices=len(surface.vertices))
         init("cpu", "f64")
         vf = volume_fractions(surface, grid)

@@ -3,7 +3,10 @@ registry they find methods in.
 
 A method is a package under ``engine/`` providing
 
-    estimate_memory(grid, method_spec) -> int     peak bytes, from the grid alone (before any work)
+    estimate_memory(grid, method_spec, surface=None, occupied=None) -> int
+                                                  peak bytes, before any cut-cell work (``surface``: the
+                                                  solid's, for methods that store only occupied cells;
+                                                  ``occupied``: their count once the geometry knows it)
     a builder (spec, geo, functions, progress) -> Method    the discretization of a validated job
 
 (imported only when a job asks for the method), and one :class:`MethodEntry` in :data:`METHODS`:
@@ -86,9 +89,10 @@ class MethodEntry:
     builder: str
     memory: str
 
-    def estimate_memory(self, grid: Grid, method_spec: Any) -> int:
-        """Upper estimate of the job's peak memory [bytes] from the grid and the spec's ``method``."""
-        return int(_load(self.memory)(grid, method_spec))
+    def estimate_memory(self, grid: Grid, method_spec: Any, surface: Any = None, occupied: int | None = None) -> int:
+        """Upper estimate of the job's peak memory [bytes] from the grid, the spec's ``method`` and, when
+        given, the solid's ``surface`` or its count of ``occupied`` cells (pieces of cells)."""
+        return int(_load(self.memory)(grid, method_spec, surface=surface, occupied=occupied))
 
     def build(self, spec: Any, geo: Any, functions: Any, progress: Setup | None = None) -> Method:
         """The method's discretization of the validated job ``spec`` on its prepared geometry;

@@ -67,10 +67,18 @@ def _quiet(stage: str, fraction: float, info: dict) -> None:
     pass
 
 
-def estimate_memory(grid: Grid, method_spec) -> int:
-    """Upper estimate of a job's peak memory [bytes] from the grid and the spec's ``method``
-    (before any work): the method's own estimate (``engine.method``)."""
-    return method_entry(method_spec.kind).estimate_memory(grid, method_spec)
+def estimate_memory(grid: Grid, method_spec, surface: Surface | None = None) -> int:
+    """Upper estimate of a job's peak memory [bytes] from the grid, the spec's ``method`` and the solid's
+    ``surface`` (before any cut-cell work): the method's own estimate (``engine.method``)."""
+    return method_entry(method_spec.kind).estimate_memory(grid, method_spec, surface=surface)
+
+
+def _check_memory(need: int, grid: Grid, method: str, limits: Limits) -> None:
+    if need > limits.max_memory_bytes:
+        raise GridError(
+            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
+            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB; increase grid.cell_size or lower grid.resolution"
+        )
 
 
 def read_mesh_input(spec: JobSpec, mesh: MeshInput, filename: str | None, base_dir: Path | None) -> tuple[bytes, str]:
@@ -130,12 +138,7 @@ def prepare_geometry(
     entry = method_entry(spec.method.kind)
     entry.check_dimension(spec.dimension)
     method = entry.kind
-    need = entry.estimate_memory(grid, spec.method)
-    if need > limits.max_memory_bytes:
-        raise GridError(
-            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
-            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB; increase grid.cell_size or lower grid.resolution"
-        )
+    _check_memory(entry.estimate_memory(grid, spec.method, surface=surface), grid, method, limits)
     times["grid"] = time.perf_counter() - t
     progress("grid", 0.1, {"shape": list(grid.shape), "spacing": grid.spacing})
 
@@ -147,6 +150,8 @@ def prepare_geometry(
         "grid": grid.to_dict(),
     }
     geo = compute_geometry(entry.kind, surface, grid, cache=cache, identity=identity, params=params)
+    if geo.cut_cells is not None:  # cells holding several pieces hold several elements: the count, not the bound
+        _check_memory(entry.estimate_memory(grid, spec.method, occupied=geo.cut_cells.num_pieces), grid, method, limits)
     times["cut_cells"] = time.perf_counter() - t
     geo.stage_times = times
     progress("cut_cells", 0.3, {"cache_hit": geo.cache_hit})

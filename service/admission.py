@@ -181,7 +181,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
                          max_cells=settings.max_cells)
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
-    need = estimate_memory(grid, spec.method)
+    need = estimate_memory(grid, spec.method, surface)
     limit = int(settings.max_job_memory_bytes)
     if need > limit:
         shape = "x".join(map(str, grid.shape))

@@ -1,4 +1,5 @@
-"""Corotated DG memory and divergence (issue 18 item 8), each job in its own process.
+"""DG memory, each job in its own process: the corotated model's memory and divergence (issue 18 item 8),
+and the memory estimate against a whole job's peak (issue 23).
 
 Every fixed-point iteration refactorises the warped matrix; PARDISO keeps a factor in MKL's own
 memory, so one that is merely dropped stayed resident: a 10-cell torus grew ~25 MB per iteration
@@ -14,6 +15,8 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -76,3 +79,35 @@ def test_diverging_fixed_point_stops_early_with_a_named_error():
     assert out.get("error") == "CorotatedDiverged", out
     assert "diverges" in out["message"] and "more steps" in out["message"], out
     assert out["iterations"] <= 12, out
+
+
+ESTIMATE = textwrap.dedent("""
+    import json, resource, sys
+    from engine.geometry.surface import Surface
+    from engine.grid import make_grid
+    from engine.pipeline import estimate_memory
+    from schemas.job import DGMethod
+    from verification.problems import problem, simulate_problem
+
+    degree, solver, h = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+    simulate_problem(problem("ball"), {"kind": "dg", "degree": degree, "solver": solver}, h)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    mesh = problem("ball").surface_mesh()
+    surface = Surface(mesh.vertices.astype(float), mesh.faces.astype("int64"))
+    grid = make_grid(*surface.bounds, cell_size=h, padding=1)
+    method = DGMethod(kind="dg", degree=degree, solver=solver)
+    print(json.dumps({"peak": peak, "estimate": estimate_memory(grid, method, surface),
+                      "grid_estimate": estimate_memory(grid, method)}))
+""")
+
+
+@pytest.mark.parametrize("degree, solver, h", [(2, "direct", 1 / 7), (2, "iterative", 1 / 8)])
+def test_the_memory_estimate_covers_a_whole_jobs_peak_and_counts_only_occupied_cells(degree, solver, h):
+    """The estimate from the surface is above the job's measured peak (a lower one would let a job
+    exhaust a worker), within 1.6x of it, and below the grid-wide estimate (the ball fills ~half its grid)."""
+    run = subprocess.run([sys.executable, "-c", ESTIMATE, str(degree), solver, str(h)], check=False, cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["peak"] <= out["estimate"] <= 1.6 * out["peak"], out
+    assert out["estimate"] < 0.75 * out["grid_estimate"], out

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ..boundary import make_boundaries
+from ..geometry.occupancy import occupied_cells_bound
 from ..grid import Grid
 from ..material import Material
 from ..method import Setup
@@ -31,42 +32,57 @@ DIRECT_LIMIT_INCOMPRESSIBLE = {1: 400_000, 2: 200_000}
 # GiB factorised; benchmarks.scan's bunny at 2 mm, 301,884: 319 iterations and 287 s against 33 and 101 s,
 # 6.75 GiB, factorised). 400k lies between the bunny, where factorising wins 2.8x, and the 48^3 shell.
 COARSE_DIRECT = 400_000
+# The memory estimate, fitted on whole jobs' measured peaks (`python -m benchmarks.dg_memory`, docs/benchmarks.md
+# "The DG memory estimate": the Lame shell and the ball, 720 ... 175,456 elements): the process before any
+# block [GiB], and a sparse Cholesky factorisation's peak (blocks, assembly copies and factor) as
+# c * unknowns^p [GiB] per degree. k = 1, 2: fitted on direct jobs, c raised until the fit lies above every
+# measured peak (1.01x, 1.16x) and by 10% more. k = 0, the constants below a cycled k = 1 level: what k = 1
+# iterative jobs hold beyond their blocks, with the nested-dissection exponent 4/3 (the data's own, 1.1, is
+# set by its small runs) and c above every run of more than 150k unknowns by 10% (the smaller ones are
+# inside BASE_GIB's margin).
+BASE_GIB = 0.5
+CHOLESKY_GIB = {0: (1.3e-7, 4 / 3), 1: (1.1 * 1.01 * 3.854e-8, 1.476), 2: (1.1 * 1.163 * 3.963e-7, 1.331)}
 
 
-def estimate_memory(grid: Grid, method_spec) -> int:
-    """Upper estimate of a job's peak memory [bytes] from the grid alone, for the solver the job will
-    use (``method.solver``; "auto" can be either, so the larger of the two, the direct one at most at
-    its size limit for a nearly incompressible material). Per cell 7 blocks (element + 6 faces) of (d *
-    basis)^2 doubles; the direct solve holds them 4 times over (assembly copies) times the sparse
-    Cholesky factor's fill, which grows like the grid's side in 3D (nested dissection); the iterative
-    one holds them twice and factorises only its degree k - 1 coarse level, or above COARSE_DIRECT
-    unknowns holds that level twice and factorises the constants below it. Measured peaks on the sphere
-    shell (`python -m benchmarks scaling`), direct, grids 18^3 / 26^3 / 34^3: k = 2 1.51 / 5.34 / 14.5
-    GiB, k = 1 0.48 / 1.11 / 2.60 GiB (this estimate 1.0-1.4x); iterative at 34^3: k = 2 3.81 GiB, k = 1
-    0.71 GiB (estimate for "auto" 1.45x, and 3.8x for k = 1, which must cover a Cholesky of 400k
-    unknowns should the material be nearly incompressible), at 50^3 k = 2 with three levels 5.80 GiB
-    (estimate 2.5x: the shell fills 38% of its cells, the estimate counts them all)."""
-    d, cells, degree = grid.dim, grid.num_cells, method_spec.degree
-    size = {1: 4, 2: 10}[degree] if d == 3 else {1: 3, 2: 6}[degree]
-    low = {1: 1, 2: 4}[degree] if d == 3 else {1: 1, 2: 3}[degree]
+def estimate_memory(grid: Grid, method_spec, surface=None, occupied: int | None = None) -> int:
+    """Upper estimate of a job's peak memory [bytes] for the solver the job will use (``method.solver``;
+    "auto" can be either, so the larger of the two, the direct one at most at its size limit for a
+    nearly incompressible material), from its elements: ``occupied`` (the cut cells' pieces) when the
+    geometry is known, else the bound ``occupied_cells_bound(surface, grid)``, else every grid cell.
 
-    def direct(count: float, basis: int) -> float:
-        fill = max(1.0, count ** (1 / d) / 12) if d == 3 else 1.0
-        return count * 7 * (d * basis) ** 2 * 8 * 4 * fill
+    Direct: the fitted Cholesky peak of the job's unknowns (CHOLESKY_GIB). Iterative: the fine blocks
+    (element + 6 faces of (3 * basis)^2 doubles per element) twice, and the degree k - 1 level
+    factorised, or above COARSE_DIRECT unknowns held twice and cycled over the factorised constants."""
+    if occupied is not None:
+        elements = occupied
+    elif surface is not None:
+        elements = occupied_cells_bound(surface, grid)
+    else:
+        elements = grid.num_cells
+    degree = method_spec.degree
+    size = {0: 3, 1: 12, 2: 30}  # unknowns per element by degree (3D)
 
-    # the k - 1 level factorised (at most COARSE_DIRECT unknowns of it), or cycled over the constants
-    bottom = direct(min(cells, COARSE_DIRECT / (d * low)), low)
-    if degree == 2 and cells * d * low > COARSE_DIRECT:
-        bottom = max(bottom, cells * 7 * (d * low) ** 2 * 8 * 2 + direct(cells, 1))
-    iterative = cells * 7 * (d * size) ** 2 * 8 * 2 + bottom
+    def cholesky(unknowns: float, fit: int) -> float:
+        c, p = CHOLESKY_GIB[fit]
+        return c * unknowns**p * 2**30
+
+    def held(k: int) -> float:  # element and face blocks of degree k, twice (matrix and assembly)
+        return elements * 7 * size[k] ** 2 * 8 * 2
+
+    low = degree - 1
+    if low >= 1 and elements * size[low] <= COARSE_DIRECT:
+        bottom = cholesky(elements * size[low], low)
+    else:
+        bottom = (held(low) if low >= 1 else 0.0) + cholesky(elements * size[0], 0)
+    iterative = held(degree) + bottom
+    direct = cholesky(elements * size[degree], degree)
     kind = method_spec.solver
-    if kind == "direct":
-        return int(direct(cells, size))
-    if kind == "iterative":
-        return int(iterative)
-    # the material is not known here: the direct solve at the larger of its limits
-    limit = max(DIRECT_LIMIT[degree], DIRECT_LIMIT_INCOMPRESSIBLE[degree])
-    return int(max(iterative, direct(min(cells, limit / (d * size)), size)))
+    if kind == "auto":  # the material is not known here: the direct solve at the larger of its limits
+        limit = max(DIRECT_LIMIT[degree], DIRECT_LIMIT_INCOMPRESSIBLE[degree])
+        need = max(iterative, cholesky(min(elements * size[degree], limit), degree))
+    else:
+        need = direct if kind == "direct" else iterative
+    return int(BASE_GIB * 2**30 + need)
 
 
 def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity:

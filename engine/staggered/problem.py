@@ -15,10 +15,11 @@ if TYPE_CHECKING:
     from .elasticity import StaggeredElasticity
 
 
-def estimate_memory(grid: Grid, method_spec=None) -> int:
+def estimate_memory(grid: Grid, method_spec=None, surface=None, occupied: int | None = None) -> int:
     """Upper estimate of a job's peak memory [bytes] from the grid alone: per cell, the fractions
     of every control-volume kind plus ~12 solver vectors per displacement component (CG and the
-    multigrid hierarchy)."""
+    multigrid hierarchy). ``surface`` and ``occupied`` are not used: the fractions and the output
+    fields are dense over the grid."""
     d = grid.dim
     return grid.num_cells * 8 * (len(control_offsets(d)) + 12 * d)
 

@@ -1,0 +1,51 @@
+"""The occupied-cell bound (engine/geometry/occupancy.py) that DG's memory estimate counts: never
+below the cells the slicing finds material in, and close to them (the grid's count was 2x)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from engine.geometry.occupancy import occupied_cells_bound
+from engine.geometry.slicing import slice_cells
+from engine.geometry.surface import Surface
+from engine.grid import Grid, make_grid
+
+
+def _surface(mesh: trimesh.Trimesh, closed: bool = True) -> Surface:
+    return Surface(mesh.vertices.astype(float), mesh.faces.astype("int64"), closed=closed)
+
+
+def _shell() -> Surface:
+    inner = trimesh.creation.icosphere(subdivisions=3, radius=0.55)
+    inner.invert()
+    return _surface(trimesh.util.concatenate([trimesh.creation.icosphere(subdivisions=3, radius=1.0), inner]))
+
+
+def _tilted_box() -> Surface:
+    box = trimesh.creation.box(extents=(1.0, 0.3, 0.6))  # 12 facets, each over many cells
+    box.apply_transform(trimesh.transformations.rotation_matrix(0.4, (1.0, 2.0, 0.5)))
+    return _surface(box)
+
+
+@pytest.mark.parametrize("make", [lambda: _surface(trimesh.creation.icosphere(subdivisions=3)), _shell, _tilted_box],
+                         ids=["ball", "shell", "tilted box"])
+@pytest.mark.parametrize("cells", [6, 11, 17])
+def test_the_bound_holds_every_cell_with_material_and_is_tight_on_curved_solids(make, cells):
+    surface = make()
+    lower, upper = surface.bounds
+    rng = np.random.default_rng(cells)
+    h = float((upper - lower).max()) / cells
+    grid = make_grid(lower - rng.uniform(0, h, 3), upper, cell_size=h, padding=1)  # an arbitrary offset
+    holding = len(np.unique(slice_cells(surface, grid).piece_cell, axis=0))
+    bound = occupied_cells_bound(surface, grid)
+    assert holding <= bound <= grid.num_cells
+    assert bound <= 1.2 * holding, (bound, holding, grid.num_cells)
+
+
+def test_an_open_surface_counts_every_cell():
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.update_faces(np.arange(len(mesh.faces)) != 0)
+    grid = Grid(origin=(-1.5,) * 3, spacing=0.25, shape=(12, 12, 12))
+    assert occupied_cells_bound(_surface(mesh, closed=False), grid) == grid.num_cells
