@@ -91,3 +91,30 @@ def test_the_engine_docstring_example_runs():
 
     failed, tried = doctest.testmod(engine, verbose=False)
     assert tried >= 3 and failed == 0
+
+
+def test_dg_memory_is_checked_again_with_the_pieces_after_slicing():
+    """Two plates closer than a cell: every cell of their layer holds two pieces (two elements), which
+    the bound from the surface counts once; the check after slicing refuses what the bound let by."""
+    import trimesh
+
+    from engine.dg.problem import estimate_memory
+    from engine.geometry.loading import load_surface
+    from engine.geometry.occupancy import occupied_cells_bound
+    from engine.grid import make_grid
+
+    plates = [trimesh.creation.box(extents=(2.0, 2.0, 0.08)) for _ in range(2)]
+    plates[0].apply_translation((0, 0, 0.11))
+    plates[1].apply_translation((0, 0, -0.07))
+    data = trimesh.util.concatenate(plates).export(file_type="stl")
+    spec = parse_job({"dimension": 3, "geometry": {"mesh": "plates.stl"}, "grid": {"cell_size": 0.5, "padding": 1},
+                      "material": {"youngs_modulus": 1.0, "poisson_ratio": 0.3}, "method": {"kind": "dg", "degree": 2}})
+    surface = load_surface(data, filename="plates.stl", dimension=3)
+    grid = make_grid(*surface.bounds, cell_size=0.5, padding=1)
+    geo = prepare_geometry(spec, data, filename="plates.stl", cache=GeometryCache(None))
+    bound, pieces = occupied_cells_bound(surface, grid), geo.cut_cells.num_pieces
+    assert pieces > bound, (pieces, bound)
+    low, high = estimate_memory(grid, spec.method, occupied=bound), estimate_memory(grid, spec.method, occupied=pieces)
+    with pytest.raises(GridError, match=r"GiB for method 'dg', over the limit"):
+        prepare_geometry(spec, data, filename="plates.stl", cache=GeometryCache(None),
+                         limits=Limits(max_memory_bytes=(low + high) // 2))
