@@ -134,11 +134,14 @@ def _job(method: str, degree: int | None, resolution: int, mesh: str, arch: str,
                    method_timings=dict(m.timings), nnz=int(m.matrix.nnz), eta=float(m.eta),
                    solve_s=m.timings.get("factorisation", 0.0) + solves)
     row["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # KiB on Linux
-    # the admission checks' estimate for this grid and method, beside the peak it must cover
-    from engine.pipeline import estimate_memory
+    # the memory check's estimate for this grid and method (DG: with the pieces' count, as after the
+    # slicing), beside the peak it must cover
+    from engine.method import method_entry
     from schemas import parse_job
 
-    row["estimate_gib"] = estimate_memory(result.grid, parse_job(spec).method) / 2**30
+    pieces = None if method == "staggered" else int(m.cut.num_pieces)
+    method_spec = parse_job(spec).method
+    row["estimate_gib"] = method_entry(method_spec.kind).estimate_memory(result.grid, method_spec, occupied=pieces) / 2**30
     row["children_peak_rss_gib"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
     queue.put(row)
 
