@@ -29,8 +29,14 @@ def _tilted_box() -> Surface:
     return _surface(box)
 
 
-@pytest.mark.parametrize("make", [lambda: _surface(trimesh.creation.icosphere(subdivisions=3)), _shell, _tilted_box],
-                         ids=["ball", "shell", "tilted box"])
+def _slanted_cylinder() -> Surface:
+    cylinder = trimesh.creation.cylinder(radius=0.5, height=6.0, sections=24)  # slivers 6 long, 0.13 wide
+    cylinder.apply_transform(trimesh.transformations.rotation_matrix(0.5, (1.0, 1.0, 0.0)))
+    return _surface(cylinder)
+
+
+@pytest.mark.parametrize("make", [lambda: _surface(trimesh.creation.icosphere(subdivisions=3)), _shell, _tilted_box,
+                                  _slanted_cylinder], ids=["ball", "shell", "tilted box", "slanted cylinder"])
 @pytest.mark.parametrize("cells", [6, 11, 17])
 def test_the_bound_holds_every_cell_with_material_and_is_tight_on_curved_solids(make, cells):
     surface = make()
@@ -41,7 +47,7 @@ def test_the_bound_holds_every_cell_with_material_and_is_tight_on_curved_solids(
     holding = len(np.unique(slice_cells(surface, grid).piece_cell, axis=0))
     bound = occupied_cells_bound(surface, grid)
     assert holding <= bound <= grid.num_cells
-    assert bound <= 1.2 * holding, (bound, holding, grid.num_cells)
+    assert bound <= 1.25 * holding, (bound, holding, grid.num_cells)
 
 
 def test_an_open_surface_counts_every_cell():
@@ -49,3 +55,11 @@ def test_an_open_surface_counts_every_cell():
     mesh.update_faces(np.arange(len(mesh.faces)) != 0)
     grid = Grid(origin=(-1.5,) * 3, spacing=0.25, shape=(12, 12, 12))
     assert occupied_cells_bound(_surface(mesh, closed=False), grid) == grid.num_cells
+
+
+def test_facets_that_would_split_into_more_pieces_than_the_budget_count_every_cell():
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    many = trimesh.util.concatenate([box] * 400)  # closed, 4,800 coincident large facets
+    grid = Grid(origin=(-2.1,) * 3, spacing=0.14, shape=(30, 30, 30))
+    assert occupied_cells_bound(_surface(many), grid) == grid.num_cells
+    assert occupied_cells_bound(_surface(box), grid) < 0.2 * grid.num_cells  # one box: its cells only

@@ -46,19 +46,26 @@ def occupied_cells_bound(surface: Surface, grid: Grid) -> int:
 
 # Facet pieces split per round, at most: bounds the memory of splitting a coarse mesh on a fine grid.
 _CHUNK = 1 << 16
+# Pieces per grid cell beyond which splitting stops and every cell counts as crossed (the bound is then
+# the grid's own): a coarse mesh of large slanted facets on a fine grid need not cost more than this.
+_PIECES_PER_CELL = 16
 
 
 def _crossed_cells(corners: np.ndarray, grid: Grid) -> np.ndarray:
     """Cells [*grid.shape] bool that the bounding box of some facet piece overlaps; facets ``corners``
-    [k, d, d] [m] wider than a cell along an axis are split at their edges' midpoints until none is
-    (4 children of a triangle, 2 of a segment), so a large slanted facet marks the cells along it,
-    not its whole box."""
+    [k, d, d] [m] wider than a cell along an axis are bisected at their longest edge until none is, so
+    a large slanted facet marks the cells along it, not its whole box."""
     d = grid.dim
     top = np.asarray(grid.shape) - 1
     crossed = np.zeros(grid.shape, dtype=bool)
+    budget = len(corners) + _PIECES_PER_CELL * grid.num_cells
     pending = [corners[i:i + _CHUNK] for i in range(0, len(corners), _CHUNK)]
     while pending:
         piece = pending.pop()
+        budget -= len(piece)
+        if budget < 0:
+            crossed[...] = True
+            return crossed
         wide = (np.ptp(piece, axis=1) > grid.spacing).any(axis=1)
         done = piece[~wide]
         lo = np.clip(grid.cell_of(done.min(axis=1)), 0, top)
@@ -66,16 +73,22 @@ def _crossed_cells(corners: np.ndarray, grid: Grid) -> np.ndarray:
         for offset in itertools.product((0, 1), repeat=d):  # a box within 2^d cells
             crossed[tuple(np.minimum(lo + offset, hi).T)] = True
         if wide.any():
-            split = _halved(piece[wide])
+            split = _bisected(piece[wide])
             pending += [split[i:i + _CHUNK] for i in range(0, len(split), _CHUNK)]
     return crossed
 
 
-def _halved(corners: np.ndarray) -> np.ndarray:
-    """The facets [k, d, d] split at their edges' midpoints: [4k, 3, 3] triangles or [2k, 2, 2] segments."""
-    if corners.shape[1] == 2:
+def _bisected(corners: np.ndarray) -> np.ndarray:
+    """The facets [k, d, d] (triangles or segments) split in two at the midpoint of their longest edge:
+    [2k, d, d]."""
+    d = corners.shape[1]
+    if d == 2:
         mid = corners.mean(axis=1)
         return np.concatenate([np.stack([corners[:, 0], mid], axis=1), np.stack([mid, corners[:, 1]], axis=1)])
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-    return np.concatenate([np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    # rotate each triangle's corners so that its longest edge runs from corner 0 to corner 1
+    edge = np.stack([np.linalg.norm(corners[:, (j + 1) % 3] - corners[:, j], axis=1) for j in range(3)], axis=1)
+    first = edge.argmax(axis=1)
+    order = (first[:, None] + np.arange(3)[None, :]) % 3
+    a, b, c = (np.take_along_axis(corners, order[:, j, None, None], axis=1)[:, 0] for j in range(3))
+    m = (a + b) / 2
+    return np.concatenate([np.stack([a, m, c], axis=1), np.stack([m, b, c], axis=1)])
