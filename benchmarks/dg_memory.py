@@ -5,7 +5,7 @@
 
 ``--measure`` runs the DG jobs of ``RUNS`` (the accuracy benchmark's Lamé shell and ball,
 ``verification.problems``, through ``engine.simulate`` with the job's own outputs), one spawned process
-each, and records the peak resident memory (``ru_maxrss``), the grid's cells, the elements (pieces of
+each, and records the peak resident memory (``VmHWM``), the grid's cells, the elements (pieces of
 cut cells) and the unknowns; the job's own memory check is lifted (``VOXELASTIC_MAX_MEMORY_GB`` 64) so
 that the estimate cannot refuse what is being measured. Without ``--measure`` it reads the JSON and
 prints, per run, the peak beside ``engine.pipeline.estimate_memory`` of the same grid, method and surface
@@ -46,7 +46,17 @@ def _job(name: str, degree: int, solver: str, h: float, queue) -> None:
     t = time.perf_counter()
     result = simulate_problem(problem(name), {"kind": "dg", "degree": degree, "solver": solver}, h)
     queue.put({"seconds": time.perf_counter() - t, "iterations": result.solver.iterations,
-               "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
+               "peak_rss_gib": peak_rss_bytes() / 2**30})
+
+
+def peak_rss_bytes() -> int:
+    """This process's peak resident memory [bytes]: VmHWM of /proc/self/status, the high-water mark of
+    its own address space. ``ru_maxrss`` also keeps that of the address space it was forked from, so a
+    job started by a large process (a test run) reads as large as its parent."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # not Linux: the kernel's figure
 
 
 def _geometry(name: str, h: float):

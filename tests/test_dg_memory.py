@@ -21,8 +21,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 SCRIPT = textwrap.dedent("""
-    import json, resource, sys
+    import json, sys
     import trimesh
+    from benchmarks.dg_memory import peak_rss_bytes
     from engine.pipeline import run
     from schemas import parse_job
 
@@ -52,7 +53,7 @@ SCRIPT = textwrap.dedent("""
     except Exception as exc:
         out["error"], out["message"] = type(exc).__name__, str(exc)
         out["iterations"] = max(iterations, default=0)
-    out["peak_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    out["peak_bytes"] = peak_rss_bytes()  # this job alone: ru_maxrss keeps the forking test process's peak
     print(json.dumps(out))
 """)
 
@@ -82,7 +83,8 @@ def test_diverging_fixed_point_stops_early_with_a_named_error():
 
 
 ESTIMATE = textwrap.dedent("""
-    import json, resource, sys
+    import json, sys
+    from benchmarks.dg_memory import peak_rss_bytes
     from engine.geometry.surface import Surface
     from engine.grid import make_grid
     from engine.pipeline import estimate_memory
@@ -91,7 +93,7 @@ ESTIMATE = textwrap.dedent("""
 
     degree, solver, h = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
     simulate_problem(problem("ball"), {"kind": "dg", "degree": degree, "solver": solver}, h)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    peak = peak_rss_bytes()  # not ru_maxrss: that keeps the forking test process's own peak
     mesh = problem("ball").surface_mesh()
     surface = Surface(mesh.vertices.astype(float), mesh.faces.astype("int64"))
     grid = make_grid(*surface.bounds, cell_size=h, padding=1)
