@@ -27,8 +27,9 @@ def occupied_cells_bound(surface: Surface, grid: Grid) -> int:
     A cell holding solid either has the surface crossing its interior -- then the bounding box of a
     facet, or of a piece of a facet split to the cell size, overlaps it -- or lies wholly inside.
     Cells no such box overlaps form connected regions the surface does not cross, each wholly inside
-    or wholly outside a closed surface: one winding-number test per region decides. Open surfaces (solids by winding number, which may pass 1/2 inside such a
-    region near a hole) get every cell of the grid, and so do grids above LARGEST_COUNTED cells.
+    or wholly outside a closed surface: one winding-number test per region decides. Open surfaces
+    (solids by winding number, which may pass 1/2 inside such a region near a hole) get every cell of
+    the grid, and so do grids above LARGEST_COUNTED cells.
     """
     if not surface.closed or len(surface.faces) == 0 or grid.num_cells > LARGEST_COUNTED:
         return grid.num_cells
