@@ -30,7 +30,6 @@ import json
 import multiprocessing as mp
 import platform
 import queue
-import resource
 import statistics
 import tempfile
 import time
@@ -38,6 +37,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+from .memory import peak_rss_bytes
 
 TARGETS = (1e-2, 1e-3, 1e-4)
 # cell sizes h [m] (mesh sizes for the peer) per problem and method; --quick keeps the first few
@@ -63,10 +64,10 @@ CAD_PEERS = ("p1", "p2")
 
 
 def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = True) -> None:
-    from verification.problems import problem
     from engine import simulate
     from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
+    from verification.problems import problem
 
     p = problem(problem_name)
     kind = {"staggered": {"kind": "staggered"}, "dg1": {"kind": "dg", "degree": 1},
@@ -109,7 +110,7 @@ def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[]
     return {**warm, "problem": problem_name, "method": method, "h": h,
             "seconds_cold": cold["seconds"], "stages_cold": cold["stages"],
             "rerun_difference": float(np.abs(np.asarray(cold["displacement"]) - u).max() / scale),
-            "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+            "peak_rss_gib": peak_rss_bytes() / 2**30,
             "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes))}
 
 

@@ -19,10 +19,11 @@ import argparse
 import json
 import multiprocessing as mp
 import platform
-import resource
 import statistics
 import time
 from pathlib import Path
+
+from .memory import peak_rss_bytes
 
 
 def _shell_method(resolution: int, degree: int, solver: str = "auto", nu: float = 0.3):
@@ -68,7 +69,7 @@ def _run(resolution: int, degree: int, solver: str, nu: float, queue) -> None:
         "stages": m.timings, "nnz": int(m.matrix.nnz), "residual": st.stats.residual, "eta": m.eta,
         "iterations": st.stats.iterations,
         "assembly_elements_per_s": m.elements.count / (m.timings["element_blocks"] + m.timings["assembly"]),
-        "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+        "peak_rss_gib": peak_rss_bytes() / 2**30,
         "backend": m.solver.backend,
     })
 
@@ -146,7 +147,7 @@ def _solver(name: str, resolution: int, degree: int, queue) -> None:
                "total_s": t2 - t0, "iterations": len(its) if name in ("pyamg-cg", "pmg-cg") else 1,
                "residual": float(np.linalg.norm(A @ x - b) / np.linalg.norm(b)),
                "difference": float(np.linalg.norm(x - reference) / np.linalg.norm(reference)),
-               "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20})
+               "peak_rss_gib": peak_rss_bytes() / 2**30})
 
 
 def main() -> None:

@@ -21,9 +21,10 @@ import multiprocessing as mp
 import os
 import platform
 import queue
-import resource
 import time
 from pathlib import Path
+
+from .memory import peak_rss_bytes
 
 # (problem, degree, solver, h): direct and iterative on a shell and on a solid ball, k = 1 and 2, from
 # small to what fits this machine's 24 GiB
@@ -48,15 +49,6 @@ def _job(name: str, degree: int, solver: str, h: float, queue) -> None:
     queue.put({"seconds": time.perf_counter() - t, "iterations": result.solver.iterations,
                "peak_rss_gib": peak_rss_bytes() / 2**30})
 
-
-def peak_rss_bytes() -> int:
-    """This process's peak resident memory [bytes]: VmHWM of /proc/self/status, the high-water mark of
-    its own address space. ``ru_maxrss`` also keeps that of the address space it was forked from, so a
-    job started by a large process (a test run) reads as large as its parent."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) * 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # not Linux: the kernel's figure
 
 
 def _geometry(name: str, h: float):

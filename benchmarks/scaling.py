@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from .geometry import run_isolated
+from .memory import peak_rss_bytes
 from .staggered import job, shell_mesh
 
 STAGGERED_SIZES = (32, 64, 128, 256)
@@ -133,7 +134,7 @@ def _job(method: str, degree: int | None, resolution: int, mesh: str, arch: str,
         row.update(dofs=int(m.size), elements=int(m.elements.count), pieces=int(m.cut.num_pieces),
                    method_timings=dict(m.timings), nnz=int(m.matrix.nnz), eta=float(m.eta),
                    solve_s=m.timings.get("factorisation", 0.0) + solves)
-    row["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # KiB on Linux
+    row["peak_rss_gib"] = peak_rss_bytes() / 2**30
     # the memory check's estimate for this grid and method (DG: with the pieces' count, as after the
     # slicing), beside the peak it must cover
     from engine.method import method_entry

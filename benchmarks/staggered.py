@@ -19,13 +19,13 @@ import argparse
 import json
 import multiprocessing as mp
 import platform
-import resource
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
 from .geometry import run_isolated
+from .memory import peak_rss_bytes
 
 
 def shell_mesh(path: Path) -> None:
@@ -62,7 +62,7 @@ def _solve(spec: dict, queue) -> None:
     t = time.perf_counter()
     r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=64 * 2**30))
     wall = time.perf_counter() - t
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    peak = peak_rss_bytes()
     queue.put({"wall_s": wall, "peak_bytes": peak, "iterations": r.solver.iterations, "residual": r.solver.residual,
                "stages": r.solver.stage_times, "shape": list(r.grid.shape)})
 

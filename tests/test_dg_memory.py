@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = textwrap.dedent("""
     import json, sys
     import trimesh
-    from benchmarks.dg_memory import peak_rss_bytes
+    from benchmarks.memory import peak_rss_bytes
     from engine.pipeline import run
     from schemas import parse_job
 
@@ -84,7 +84,7 @@ def test_diverging_fixed_point_stops_early_with_a_named_error():
 
 ESTIMATE = textwrap.dedent("""
     import json, sys
-    from benchmarks.dg_memory import peak_rss_bytes
+    from benchmarks.memory import peak_rss_bytes
     from engine.geometry.surface import Surface
     from engine.grid import make_grid
     from engine.pipeline import estimate_memory
