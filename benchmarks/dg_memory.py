@@ -50,18 +50,15 @@ def _job(name: str, degree: int, solver: str, h: float, queue) -> None:
                "peak_rss_gib": peak_rss_bytes() / 2**30})
 
 
-
-def _geometry(name: str, h: float):
-    """(surface, grid, elements) of a problem's job at cell size h, as the engine builds them."""
-    from engine.geometry.slicing import slice_cells
+def problem_grid(name: str, h: float):
+    """(surface, grid) of a problem's job at cell size h [m], as the engine builds them."""
     from engine.geometry.surface import Surface
     from engine.grid import make_grid
     from verification.problems import problem
 
     mesh = problem(name).surface_mesh()
     surface = Surface(mesh.vertices.astype(float), mesh.faces.astype("int64"))
-    grid = make_grid(*surface.bounds, cell_size=h, padding=1)
-    return surface, grid, slice_cells(surface, grid).num_pieces
+    return surface, make_grid(*surface.bounds, cell_size=h, padding=1)
 
 
 def measure(only: str | None) -> list[dict]:
@@ -79,8 +76,10 @@ def measure(only: str | None) -> list[dict]:
         except queue.Empty as exc:  # a crash (nothing sent) or a job past 30 minutes is a row saying so
             row["failed"] = f"{type(exc).__name__}, exit code {proc.exitcode}"
         proc.join(timeout=30)
-        _, grid, elements = _geometry(name, h)
-        row.update(grid_cells=grid.num_cells, elements=int(elements))
+        from engine.geometry.slicing import slice_cells
+
+        surface, grid = problem_grid(name, h)
+        row.update(grid_cells=grid.num_cells, elements=slice_cells(surface, grid).num_pieces)
         rows.append(row)
         print(json.dumps(row), flush=True)
     return rows
@@ -95,7 +94,7 @@ def report(rows: list[dict]) -> str:
     for r in rows:
         if "failed" in r:
             continue
-        surface, grid, _ = _geometry(r["problem"], r["h"])
+        surface, grid = problem_grid(r["problem"], r["h"])
         est = estimate_memory(grid, DGMethod(kind="dg", degree=r["degree"], solver=r["solver"]), surface) / 2**30
         lines.append(f"| {r['problem']} | {r['degree']} | {r['solver']} | 1/{1 / r['h']:.0f} | {r['grid_cells']:,} | "
                      f"{r['elements']:,} | {r['peak_rss_gib']:.2f} | {est:.2f} | {est / r['peak_rss_gib']:.2f} |")

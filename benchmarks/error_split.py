@@ -76,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--traction-everywhere", action="store_true")
     ap.add_argument("--hold-everywhere", action="store_true")
     a = ap.parse_args(argv)
+    if (a.traction_everywhere or a.hold_everywhere) and a.problem != "ball":
+        ap.error("--traction-everywhere and --hold-everywhere change the ball's cap and rest boundaries only")
     for n in a.n:
         print(json.dumps(one(a.problem, n, a.form, a.traction_everywhere, a.hold_everywhere)), flush=True)
     return 0
