@@ -149,6 +149,10 @@ class StaggeredMethod(SpecModel):
 
     model_config = TAGGED
     kind: Literal["staggered"] = "staggered"
+    solver: Literal["auto", "direct", "iterative"] = Field(
+        "auto", description="Linear solver: 'direct' sparse Cholesky of the whole problem (its memory grows "
+                            "superlinearly), 'iterative' CG preconditioned by a multigrid V-cycle (to solver.rtol), "
+                            "'auto' direct up to 30,000 unknowns.")
 
 
 class DGMethod(SpecModel):

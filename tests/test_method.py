@@ -72,6 +72,6 @@ def test_the_setup_reports_its_parts_in_order(kind):
     fractions = [f for s, f, _ in seen]
     assert fractions == sorted(fractions)  # the bar only moves forward
     names = [p for _, p in parts]
-    expected = {"staggered": ["surface quadrature", "operator", "boundaries", "multigrid smoothers and coarsest factor"],
+    expected = {"staggered": ["surface quadrature", "operator", "boundaries", "sparse factor"],  # 12 cells: solved directly
                 "dg": ["elements and basis", "element integrals", "boundaries and loads", "assembly and factorisation"]}[kind]
     assert [n for n in names if n in expected] == expected, names

@@ -406,6 +406,7 @@ BAD = [
     ("rtol one", "solver.rtol", 1, "solver.rtol", "less than 1"),
     ("iterations zero", "solver.max_iterations", 0, "solver.max_iterations", "greater than or equal to 1"),
     ("arch gpu", "solver.arch", "gpu", "solver.arch", "'cpu', 'cuda' or 'auto'"),
+    ("staggered solver", "method.solver", "cholmod", "method.solver", "'auto', 'direct' or 'iterative'"),
     ("dimension 4", "dimension", 4, "dimension", "2 or 3"),
     ("no material", "material", DELETE, "material", "required key is missing"),
 ]

@@ -26,6 +26,7 @@ def spec(resolution: int, nu: float = 0.3, clamp: float = -0.7) -> dict:
     return {
         "geometry": {"mesh": "sphere.stl"},
         "grid": {"resolution": resolution},
+        "method": {"kind": "staggered", "solver": "iterative"},
         "material": {"youngs_modulus": 1e6, "poisson_ratio": nu, "density": 1000},
         "loads": {"gravity": [0, 0, -9.81]},
         "boundaries": [{"kind": "displacement", "name": "base", "region": {"box": [[-2, -2, -2], [2, 2, clamp]]}, "value": [0, 0, 0]}],

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,6 +21,30 @@ import scipy.sparse.linalg as spla
 
 from .linear import SolverError, SolveStats
 
+
+
+def _point_pypardiso_at_mkl() -> None:
+    """Tell pypardiso where the mkl wheel put its runtime library, unless the environment already
+    does. Without it pypardiso's import (it builds a solver at import) and every later solver
+    search for the library with ``find_library`` and a recursive glob of the environment: 0.22 s
+    of the first direct solve in a fresh process, which small staggered jobs pay (docs/benchmarks.md,
+    "Cold start"). The mkl wheel's own file list names the library; 0.02 s."""
+    if "PYPARDISO_MKL_RT" in os.environ:
+        return
+    try:
+        from importlib import metadata
+
+        found = [f for f in metadata.files("mkl") or () if f.name.startswith(("libmkl_rt.so", "mkl_rt"))]
+    except metadata.PackageNotFoundError:  # pragma: no cover - MKL from elsewhere (conda, system)
+        return
+    for f in found:
+        path = Path(f.locate())
+        if path.is_file():
+            os.environ["PYPARDISO_MKL_RT"] = str(path.resolve())
+            return
+
+
+_point_pypardiso_at_mkl()
 try:  # MKL wheels exist for x86-64 only; elsewhere SuperLU does the work
     import pypardiso
 except (ImportError, OSError):  # pragma: no cover - exercised only where MKL is missing

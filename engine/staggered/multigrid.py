@@ -8,7 +8,7 @@ prescribed when more than a quarter (by interpolation weight) of the fine DOFs i
 are. Smoothing is a Chebyshev polynomial in D^-1 A (symmetric, so the cycle is a valid CG
 preconditioner), with extra steps on a band around cut cells and prescribed DOFs, where the
 rediscretised coarse operator departs most from the fine one (the boundary smoothing of Zhu et
-al. 2010 and McAdams et al. 2010); the coarsest level is solved directly (sparse LU) with the
+al. 2010 and McAdams et al. 2010); the coarsest level is solved directly (sparse Cholesky) with the
 rigid modes of floating bodies bordered out.
 
 Near incompressibility (lambda / mu above ROBUST_RATIO) point smoothing cannot reduce the
@@ -25,13 +25,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..errors import ThinFeatureError
 from ..method import Setup, no_progress
 from ..grid import axis_pairs
 from ..runtime import device_array
 from ..solvers.cg import SolverError
+from ..solvers.direct import Cholesky, NotPositiveDefinite
 from ..solvers.rigid import free_modes
 from . import assembly, kernels, smoother_kernels
 from .nitsche import make_surface_operator
@@ -77,7 +77,8 @@ CURL_SPREAD = 30.0
 class Multigrid:
     """V-cycle preconditioner on ``levels`` (finest first). Call :meth:`update` after the fine
     level's free DOFs or shift change. ``robust``: curl smoothing and face transfers (default:
-    when lambda / mu > ROBUST_RATIO)."""
+    when lambda / mu > ROBUST_RATIO). ``max_levels`` 1 makes the cycle the fine level's sparse
+    factorisation: an exact solve (small problems, ``StaggeredElasticity.solver``)."""
 
     def __init__(self, fine: Level, *, max_levels: int = 12, progress: Setup | None = None,
                  robust: bool | None = None) -> None:
@@ -106,7 +107,8 @@ class Multigrid:
         # (the curl smoothing keeps its step apart from the residual: one more array per level)
         extra = 1 if self.robust else 0
         self.work = [tuple(lv.zeros() for _ in range((3 if k else 1) + extra)) for k, lv in enumerate(self.levels)]
-        say("multigrid smoothers and coarsest factor", 0.5)  # the first job in a process compiles kernels here
+        # the first job in a process compiles kernels here
+        say("multigrid smoothers and coarsest factor" if len(self.levels) > 1 else "sparse factor", 0.5)
         self.update()
 
     def update(self) -> None:
@@ -132,7 +134,7 @@ class Multigrid:
             lv.set_free(lv.active & ~(share > FIXED_SHARE))
             if fine.shift != 0.0 or lv.shift != 0.0:
                 lv.set_shift(fine.shift, fine.density)
-        self.coarse = CoarseSolver(self.levels[-1])
+        self.coarse = CoarseSolver(self.levels[-1], "coarsest multigrid level" if len(self.levels) > 1 else "problem")
         if self.robust:
             self.curls = [CurlSmoother(lv) for lv in self.levels[:-1]]
             self.bounds = [_largest_eigenvalue(lv, self.work[k][0], _curl_step(lv, sm, self.work[k][1])) * MARGIN
@@ -275,13 +277,16 @@ def _largest_eigenvalue(level: Level, v, step=None) -> float:
 
 
 class CoarseSolver:
-    """Sparse LU of the coarsest operator on its free DOFs. Bodies whose rigid modes the coarse
-    Dirichlet DOFs leave free (and no mass term) are bordered with those modes, and so are the
-    zero-energy motions of thin features the averaged coarse fractions make (``unheld_groups``; the
-    fine level has none, or the setup stopped): the bordered system is regular and returns the
-    solution orthogonal to them, which the finer levels' smoothing corrects."""
+    """Sparse Cholesky (``engine.solvers.direct``) of a level's operator on its free DOFs: the
+    coarsest level of a V-cycle, or the fine level itself when the whole problem is solved
+    directly (a one-level hierarchy). Bodies whose rigid modes the level's Dirichlet DOFs leave
+    free (and no mass term) are bordered with those modes, and so are the zero-energy motions of
+    thin features the averaged coarse fractions make (``unheld_groups``; the fine level has none,
+    or the setup stopped): the bordered system is regular and returns the solution orthogonal to
+    them, which the finer levels' smoothing, or CG's projection, corrects. ``name`` says which
+    operator it is in errors."""
 
-    def __init__(self, level: Level) -> None:
+    def __init__(self, level: Level, name: str = "coarsest multigrid level") -> None:
         self.level = level
         lay = level.layout
         d = lay.dim
@@ -316,18 +321,28 @@ class CoarseSolver:
             if mech.count:
                 self.mechanisms = mech.count
                 border = _with_mechanisms(border, mech, self.comp, self.pos, level.size)
-        if border is not None and border.shape[1]:
-            A = sp.bmat([[A, sp.csr_matrix(border)], [sp.csr_matrix(border.T), None]])
-        try:
-            self.lu = spla.splu(A.tocsc()) if A.shape[0] else None
-        except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
-            raise SolverError(
-                f"solver: the operator of the coarsest multigrid level ({n} unknowns at spacing "
-                f"{level.spacing:.4g} m) is singular beyond its rigid modes and {self.mechanisms} thin-feature "
-                f"motion(s) ({exc}): some displacement samples are held by nothing; refine the grid around thin "
-                "walls or rods, or use method.kind 'dg'",
-                "singular",
-            ) from None
+        bordered = border is not None and border.shape[1] > 0
+        if bordered:
+            k = border.shape[1]
+            zero = sp.csr_matrix((np.zeros(k), (np.arange(k), np.arange(k))), shape=(k, k))  # PARDISO needs the diagonal
+            A = sp.bmat([[A, sp.csr_matrix(border)], [sp.csr_matrix(border.T), zero]], format="csr")
+        self.factor = None
+        if A.shape[0]:
+            # sparse Cholesky (PARDISO): SuperLU's LU took 0.73 s on the 8,856 unknowns of a ball
+            # at 16 cells across and 9.2 s on 26,964 (PARDISO 0.06 / 0.32 s; docs/benchmarks.md)
+            try:
+                self.factor = Cholesky(A.tocsr(), definite=not bordered)
+                negatives = self.factor.negatives - (border.shape[1] if bordered else 0)
+                if negatives > 0:
+                    raise NotPositiveDefinite(f"{negatives} negative pivot(s) beyond the bordered modes")
+            except (NotPositiveDefinite, RuntimeError) as exc:
+                raise SolverError(
+                    f"solver: the operator of the {name} ({n} unknowns at spacing "
+                    f"{level.spacing:.4g} m) is singular beyond its rigid modes and {self.mechanisms} thin-feature "
+                    f"motion(s) ({exc}): some displacement samples are held by nothing; refine the grid around thin "
+                    "walls or rods, or use method.kind 'dg'",
+                    "singular",
+                ) from None
 
     @staticmethod
     def _floating_modes(level: Level, comp, flat_pos, idx, free, held) -> np.ndarray:
@@ -358,10 +373,10 @@ class CoarseSolver:
     def solve(self, b, x) -> None:
         lv = self.level
         out = np.zeros((lv.dim, lv.size))
-        if self.lu is not None:
-            rhs = np.zeros(self.lu.shape[0])
+        if self.factor is not None:
+            rhs = np.zeros(self.factor.n)
             rhs[: self.n] = b.to_numpy()[self.comp, self.pos]
-            out[self.comp, self.pos] = self.lu.solve(rhs)[: self.n]
+            out[self.comp, self.pos] = self.factor.solve(rhs)[: self.n]
         x.from_numpy(out.astype(lv.dtype, copy=False))
 
 
