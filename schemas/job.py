@@ -152,7 +152,8 @@ class StaggeredMethod(SpecModel):
     solver: Literal["auto", "direct", "iterative"] = Field(
         "auto", description="Linear solver: 'direct' sparse Cholesky of the whole problem (its memory grows "
                             "superlinearly), 'iterative' CG preconditioned by a multigrid V-cycle (to solver.rtol), "
-                            "'auto' direct up to 30,000 unknowns.")
+                            "'auto' direct on grids of up to 60,000 samples (3 x (cells + 1 per axis)); "
+                            "the unknowns are those beside material.")
 
 
 class DGMethod(SpecModel):

@@ -6,14 +6,13 @@ level, ``nitsche.py``), the consistent load vector (body force
 weighted by face fractions, surface tractions by quadrature on the mesh triangles; on a body that
 no displacement boundary holds, with the surface loads' exact net moment, so that loads balanced on
 the surface stay balanced), rigid-mode checks for bodies the holds leave free, the
-multigrid-preconditioned CG solve (small problems: the fine level factorised, ``DIRECT_DOFS``)
+multigrid-preconditioned CG solve (small grids: the fine level factorised, ``solves_directly``)
 and the fields at cell centres, probes and surface vertices.
 ``engine.analysis`` drives it in time.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import InitVar, dataclass, field
@@ -36,7 +35,7 @@ from .fields import StaggeredFields
 from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
 from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
-from .problem import DIRECT_BOX, DIRECT_DOFS
+from .problem import solves_directly
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -64,7 +63,7 @@ class StaggeredElasticity(StaggeredFields):
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
     dynamic: bool = True  # False: no backward-Euler steps will come, so no mass is ever needed
     # "direct": the whole problem factorised (sparse Cholesky), "iterative": multigrid-preconditioned
-    # CG, "auto": direct up to DIRECT_DOFS unknowns in an index box of DIRECT_BOX positions (problem.py)
+    # CG, "auto": direct on small grids (``problem.solves_directly``)
     solver: str = "auto"
 
     def __post_init__(self, fractions: VolumeFractions) -> None:
@@ -128,10 +127,8 @@ class StaggeredElasticity(StaggeredFields):
             )
         if self.solver not in ("auto", "direct", "iterative"):
             raise ValueError(f"solver: expected 'auto', 'direct' or 'iterative', got {self.solver!r}")
-        direct = self.solver == "direct" or (self.solver == "auto" and len(self.dof_comp) <= DIRECT_DOFS
-                                             and math.prod(level.layout.box) <= DIRECT_BOX)
         # a one-level hierarchy is the fine level's factorisation: CG then stops after one step
-        self.multigrid = Multigrid(level, max_levels=1 if direct else 12,
+        self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
                                    progress=lambda part, share: say(part, 0.5 + 0.5 * share))
         self.space = _Space(level)
         if not self.dynamic:
