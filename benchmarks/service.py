@@ -10,6 +10,8 @@
    with ``--hog N`` N CPU-bound processes at the default priority run beside the jobs ("other
    work on the machine", issue 18: status requests at 200/s then reached p99 12.6 s).
    ``--only status`` skips parts 2 and 3.
+   ``--only first-job``: instead of all this, the first job of a fresh worker against its next
+   ones (the worker's seconds inside each, on ``--repeats`` one-worker servers, kernel cache warm).
 2. 100 submissions (multipart, the small example job) from 4 threads: time until all 100 are
    accepted (floor: < 10 s).
 3. Service overhead over the bare CLI for the same job (the example cantilever at
@@ -284,6 +286,25 @@ def overhead(svc: Service, workdir: Path, cache_dir: str, resolution: int, repea
             "ratio": s / c, "service_share_seconds": statistics.median(a - b for a, b in zip(srv, inside, strict=True))}
 
 
+def first_jobs(workdir: Path, cache_dir: str, servers: int, jobs: int = 3) -> list[list[float]]:
+    """The worker's seconds inside each of ``jobs`` small jobs (the example at 16 cells) on each of
+    ``servers`` fresh one-worker servers, after a first server has warmed the kernel cache: the
+    first job of a worker against the next ones (issue 23's cold start, on the service)."""
+    warm = Service(workdir, cache_dir, workers=1, geometry_cache="false")
+    try:
+        warm.wait(warm.submit(spec(16)))
+    finally:
+        warm.close()
+    runs = []
+    for _ in range(servers):
+        svc = Service(workdir, cache_dir, workers=1, geometry_cache="false")
+        try:
+            runs.append([svc.wait(svc.submit(spec(16)))["timings"]["run_seconds"] for _ in range(jobs)])
+        finally:
+            svc.close()
+    return runs
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=3)
@@ -296,11 +317,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--connections", type=int, default=4, help="keep-alive connections of the status load")
     ap.add_argument("--client-nice", type=int, help="niceness of the load generator during the status load "
                     "(e.g. -10 as root: it stands for clients elsewhere and must not be starved by --hog)")
-    ap.add_argument("--only", choices=("status",), help="run only this part")
+    ap.add_argument("--only", choices=("status", "first-job"), help="run only this part")
     args = ap.parse_args(argv)
     workdir = Path(tempfile.mkdtemp(prefix="voxelastic-bench-service-"))
     cache_dir = os.environ.get("VOXELASTIC_CACHE_DIR") or str(workdir / "cache")
     results: dict = {"machine": f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} cores"}
+    if args.only == "first-job":
+        try:
+            runs = first_jobs(workdir, cache_dir, args.repeats)
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+        for r in runs:
+            print(f"a fresh worker's jobs (worker seconds): {', '.join(f'{x:.2f}' for x in r)}")
+        return 0
     svc = Service(workdir, cache_dir, workers=2, geometry_cache="false")
     try:
         svc.wait(svc.submit(spec(16)))  # first job of each worker compiles or loads kernels

@@ -85,6 +85,7 @@ def worker_main(conn: Connection, arch: str, precision: str, cache_dir: str, nic
         from engine.runtime import init, save_kernel_cache
 
         info = init(arch, precision, cache_dir=Path(cache_dir) / "gstaichi")
+        preload()
     except BaseException as exc:  # an unusable backend: say so instead of dying silently
         conn.send(("init_error", f"{type(exc).__name__}: {exc}"))
         return
@@ -99,6 +100,18 @@ def worker_main(conn: Connection, arch: str, precision: str, cache_dir: str, nic
         outcome = run_task(task, _Reporter(conn))
         save_kernel_cache()  # before the answer: a worker stopped after it keeps what it compiled
         conn.send(outcome)
+
+
+def preload() -> None:
+    """Import what every job imports (the pipeline with trimesh and scipy's spatial parts, both
+    methods, the result writer) before the worker says it is ready: 0.6 s of a worker's start that
+    its first job paid before (docs/benchmarks.md, "Cold start"). What stays for the first job is
+    the first launch of each kernel it uses."""
+    import engine.dg.elasticity  # noqa: F401
+    import engine.output  # noqa: F401
+    import engine.peaks  # noqa: F401
+    import engine.pipeline  # noqa: F401
+    import engine.staggered.elasticity  # noqa: F401
 
 
 class _Reporter:
