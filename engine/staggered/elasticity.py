@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..boundary import Prescribed, SurfaceLoad, hold_warnings, patch_quadrature, tractions
-from ..errors import BoundaryError
+from ..errors import BoundaryError, VoxelasticError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
@@ -67,6 +67,8 @@ class StaggeredElasticity(StaggeredFields):
     solver: str = "auto"
 
     def __post_init__(self, fractions: VolumeFractions) -> None:
+        if self.solver not in ("auto", "direct", "iterative"):
+            raise VoxelasticError(f"method.solver: 'auto', 'direct' or 'iterative', got {self.solver!r}")
         say = self.progress or no_progress
         say("surface quadrature", 0.0)
         grid = fractions.grid
@@ -125,8 +127,6 @@ class StaggeredElasticity(StaggeredFields):
                 f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
                 f"weight was raised to {MIN_FRACTION:g} (bounds the conditioning; adds at most that share of a cell's energy)"
             )
-        if self.solver not in ("auto", "direct", "iterative"):
-            raise ValueError(f"solver: expected 'auto', 'direct' or 'iterative', got {self.solver!r}")
         # a one-level hierarchy is the fine level's factorisation: CG then stops after one step
         self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
                                    progress=lambda part, share: say(part, 0.5 + 0.5 * share))
