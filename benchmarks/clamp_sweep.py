@@ -27,7 +27,15 @@ SWEEPS = ("tip", "clamp", "both", "pull_clamped", "pull_roller")
 
 
 def sweep(kind: str, cells: int, method: dict, nu: float) -> list[float]:
-    from verification.parts import ALIGNED, E0, TIP_TRACTION, WIDTH, Bar, offset_grid, timoshenko_tip
+    from verification.parts import (
+        ALIGNED,
+        E0,
+        TIP_TRACTION,
+        WIDTH,
+        Bar,
+        offset_grid,
+        timoshenko_tip,
+    )
     from verification.stress.running import cantilever_job, job, solve, tip_deflection
 
     h = WIDTH / cells

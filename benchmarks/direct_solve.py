@@ -64,10 +64,10 @@ def main(argv: list[str] | None = None) -> int:
             once(spec, mesh, "direct")  # warm-up: kernels, MKL
             runs = {"direct": [], "iterative": []}
             for _ in range(args.repeats):
-                for solver in runs:
+                for solver, rows in runs.items():
                     seconds, result = once(spec, mesh, solver)
                     stages = result.solver.stage_times
-                    runs[solver].append((seconds, stages["discretization"] + stages["solve"], result.solver.iterations))
+                    rows.append((seconds, stages["discretization"] + stages["solve"], result.solver.iterations))
             row = {"shape": shape, "resolution": n}
             for solver, rs in runs.items():
                 row[solver] = {"job_s": round(statistics.median(r[0] for r in rs), 3),

@@ -152,8 +152,8 @@ class StaggeredMethod(SpecModel):
     solver: Literal["auto", "direct", "iterative"] = Field(
         "auto", description="Linear solver: 'direct' sparse Cholesky of the whole problem (its memory grows "
                             "superlinearly), 'iterative' CG preconditioned by a multigrid V-cycle (to solver.rtol), "
-                            "'auto' direct on grids of up to 60,000 samples (3 x (cells + 1 per axis)); "
-                            "the unknowns are those beside material.")
+                            "'auto' direct when the grid has at most 60,000 displacement samples (the dimension "
+                            "times the product of cells + 1 per axis; only those beside material are unknowns).")
 
 
 class DGMethod(SpecModel):

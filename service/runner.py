@@ -15,6 +15,7 @@ succeeded is the parent's business. Only engine modules import Taichi.
 
 from __future__ import annotations
 
+import importlib
 import os
 import shutil
 import signal
@@ -107,11 +108,8 @@ def preload() -> None:
     methods, the result writer) before the worker says it is ready: 0.6 s of a worker's start that
     its first job paid before (docs/benchmarks.md, "Cold start"). What stays for the first job is
     the first launch of each kernel it uses."""
-    import engine.dg.elasticity  # noqa: F401
-    import engine.output  # noqa: F401
-    import engine.peaks  # noqa: F401
-    import engine.pipeline  # noqa: F401
-    import engine.staggered.elasticity  # noqa: F401
+    for module in ("engine.pipeline", "engine.output", "engine.peaks", "engine.staggered.elasticity", "engine.dg.elasticity"):
+        importlib.import_module(module)
 
 
 class _Reporter:

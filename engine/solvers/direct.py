@@ -22,7 +22,6 @@ import scipy.sparse.linalg as spla
 from .linear import SolverError, SolveStats
 
 
-
 def _point_pypardiso_at_mkl() -> None:
     """Tell pypardiso where the mkl wheel put its runtime library, unless the environment already
     does. Without it pypardiso's import (it builds a solver at import) and every later solver

@@ -43,7 +43,7 @@ COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # features): its correction is poor, so the hierarchy stops before it. Shares measured: sphere
 # 0.53 / 0.70 / 0.89 at boxes 20 / 13 / 9; shell (radii 1 and 0.6) 0.78 / 1.0 at boxes 21 / 13.
 # Shell at 128^3: 41 iterations when coarsening to a 9 box, 23 stopping at 21, 18 stopping at 37
-# (whose sparse LU then took 30 s).
+# (whose sparse LU, SuperLU then, took 30 s).
 MAX_CUT_SHARE = 0.85
 DEGREE = 3  # Chebyshev smoothing steps before and after the coarse correction
 # The smoother targets the eigenvalues of D^-1 A in [UPPER / SPREAD, UPPER] with UPPER a
@@ -329,7 +329,7 @@ class CoarseSolver:
         self.factor = None
         if A.shape[0]:
             # sparse Cholesky (PARDISO): SuperLU's LU took 0.73 s on the 8,856 unknowns of a ball
-            # at 16 cells across and 9.2 s on 26,964 (PARDISO 0.06 / 0.32 s; docs/benchmarks.md)
+            # at 16 cells across and 9.2 s on 26,964 (PARDISO 0.07 / 0.31 s; docs/benchmarks.md)
             try:
                 self.factor = Cholesky(A.tocsr(), definite=not bordered)
                 negatives = self.factor.negatives - (border.shape[1] if bordered else 0)
