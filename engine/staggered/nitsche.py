@@ -120,12 +120,14 @@ class SurfaceOperator:
         return self.mass.diagonal() - 2.0 * b
 
 
-def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator:
-    """The Nitsche terms of ``quad`` on ``level`` (whose ``origin`` must be known)."""
+def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None = None) -> SurfaceOperator:
+    """The Nitsche terms of ``quad`` on ``level`` (whose ``origin`` must be known); ``lam`` [Pa]: the
+    first Lame parameter of their flux and penalty, the level's by default."""
     d, h, lay = level.dim, level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
     nv = d + len(axis_pairs(d))
-    lam, mu = level.lam, level.mu
+    lam = level.lam if lam is None else float(lam)
+    mu = level.mu
     big = traction_bound(lam, mu, d)
     x, w = quad.points, quad.weights
     src, sources, fill = _sources(level, np.floor((x - origin) / h).astype(np.int64))
@@ -135,7 +137,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature) -> SurfaceOperator
     size = level.size
 
     # stress functional Sig: rows s * nv + v (Voigt: normals, then pairs), columns sample keys
-    s_rows, s_keys, s_vals = _stress_rows(level, sources, nv)
+    s_rows, s_keys, s_vals = _stress_rows(level, sources, nv, lam)
     # interpolation of each component at the points, on the active samples, renormalised
     mass_r, mass_c, mass_v = [], [], []
     flux_r, flux_c, flux_v = [], [], []
@@ -276,13 +278,13 @@ def cell_fill(level: Level, cell: np.ndarray) -> np.ndarray:
     return out
 
 
-def _stress_rows(level: Level, cells: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _stress_rows(level: Level, cells: np.ndarray, nv: int, lam: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The Voigt stresses of cells [S, d] as linear functionals of the samples: (rows s * nv + v,
     sample keys a * size + position, coefficients [Pa / m]). Normal strains from the cell's faces,
     shear strains the edge-fraction-weighted mean over its four edges (every cell here has fill > 0,
     so each pair has an edge that holds material and whose samples are active)."""
     lay, d, h, size = level.layout, level.dim, level.spacing, level.size
-    lam, mu = level.lam, level.mu
+    mu = level.mu
     eye = np.eye(d, dtype=np.int64)
     s = np.arange(len(cells))
     rows, keys, vals = [], [], []
