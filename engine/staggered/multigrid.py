@@ -76,7 +76,7 @@ CURL_SPREAD = 30.0
 # a coarse field that meets the coarse hold does not meet the fine one once prolonged, and the
 # mismatch is lambda-weighted; a stiffer coarse hold leaves the held band to the fine smoothing.
 # Shell held below z = -0.8, nu 0.4999 (rtol 1e-6): 64^3 95 / 542 / 150 / 70 / 70 CG iterations
-# at 1 / 0 / 0.1 / 4 / 16 (64: the coarsest factor broke down); 128^3 86 -> 66 (121 -> 91 s, nu
+# at 1 / 0 / 0.1 / 4 / 16 (64: the coarsest factor broke down); 128^3 86 -> 66 (119 -> 91 s, nu
 # 0.3: 13 iterations, 15 s); nu 0.3 itself does not take this path (64^3: 10 either way).
 COARSE_HOLD_LAMBDA = 4.0
 
