@@ -1,5 +1,5 @@
 """Small staggered jobs: the whole problem factorised against the multigrid V-cycle (``method.solver``
-"direct" / "iterative"; "auto" chooses direct up to ``engine.staggered.problem.DIRECT_DOFS``).
+"direct" / "iterative"; "auto" chooses direct up to ``engine.staggered.problem.DIRECT_SAMPLES``).
 
     .venv/bin/python -m benchmarks.direct_solve [--bar 32 48 64 80] [--ball 16 24 32 40] [--repeats 3]
 

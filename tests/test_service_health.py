@@ -55,9 +55,9 @@ print(before, [m for m in jobs_import if m not in sys.modules])
 
 
 def test_a_worker_imports_what_jobs_import_before_it_says_it_is_ready():
-    """The first job of a worker used to import the pipeline, trimesh and the methods itself: 1.12 s
-    against 0.16 s for the next ones (the bundled cantilever at 16 cells, run_seconds); with them
-    imported at the worker's start 0.47 s (docs/benchmarks.md, "Cold start")."""
+    """The first job of a worker used to import the pipeline, trimesh and the methods itself: 1.07-1.15 s
+    against 0.14-0.17 s for the next ones (the bundled cantilever at 16 cells, the worker's seconds);
+    with them imported at the worker's start 0.55-0.61 s (docs/benchmarks.md, "Cold start")."""
     out = subprocess.run([sys.executable, "-c", PRELOAD], cwd=ROOT, capture_output=True, text=True, timeout=120,
                          check=False)
     assert out.returncode == 0, out.stderr[-2000:]

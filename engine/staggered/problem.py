@@ -18,11 +18,11 @@ if TYPE_CHECKING:
 
 # "auto" factorises the whole problem instead of building a V-cycle when the grid's index box holds
 # at most this many samples (d prod(n + 1); the unknowns are those beside material, fewer): the
-# factor then costs less than the hierarchy's setup and CG's iterations (warm jobs, PARDISO,
-# direct / multigrid: bundled cantilever 5,285 unknowns 0.21 / 0.55 s, 34,593 (51,456 samples)
-# 0.69 / 2.1 s, 64,736 (89,889) 1.35 / 1.42 s; a clamped ball 26,964 (59,049) 0.54 / 0.75 s,
-# 61,200 (128,625) 1.7 / 1.0 s: a compact body's factor fills faster; docs/benchmarks.md, "Small
-# jobs solved directly"). Decided from the grid alone, so the memory estimate knows it.
+# factor then costs less than the hierarchy's setup and CG's iterations (benchmarks.direct_solve,
+# warm jobs, direct / multigrid: bundled cantilever 5,285 unknowns 0.20 / 0.62 s, 34,593 (51,456
+# samples) 0.87 / 1.78 s, 64,736 (89,889) 1.54 / 1.60 s; a clamped ball 26,964 (59,049) 0.59 /
+# 0.60 s, 61,200 (128,625) 1.79 / 0.90 s: a compact body's factor fills faster; docs/benchmarks.md,
+# "Small jobs solved directly"). Decided from the grid alone, so the memory estimate knows it.
 DIRECT_SAMPLES = 60_000
 # PARDISO's factor (its permanent and factorisation memory) of the staggered operator, measured on
 # a clamped ball (8,856 ... 115,644 unknowns: 22, 91, 264, 682 MB) and the cantilever (15,640 ...
