@@ -1,0 +1,46 @@
+import sys
+sys.path.insert(0, __import__("os").path.dirname(__file__))
+import numpy as np, trimesh, time
+import cutstrain
+from engine import simulate
+from engine.pipeline import Functions
+on = sys.argv[1] == "on"
+free = len(sys.argv) > 3 and sys.argv[3] == "free"
+hs = [float(x) for x in sys.argv[2].split(",")] if len(sys.argv) > 2 else [0.1, 0.05, 0.025]
+cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["flux"] = os.environ.get("FLUX") == "1"; cutstrain.G["jhold"] = os.environ.get("JHOLD") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"; import os; cutstrain.G["shear"] = os.environ.get("SHEAR") == "1"
+cutstrain.G["slice"] = on
+import os; cutstrain.G["beta"] = float(os.environ.get("BETA", "0.05")); cutstrain.G["second"] = os.environ.get("SECOND") == "1"; cutstrain.G["extend"] = os.environ.get("EXTEND") == "1"; cutstrain.G["along"] = os.environ.get("ALONG", "1") == "1"
+a, b, nu = 0.5, 1.0, 0.3
+lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))
+B = 1.0 / ((3 * lam + 2 * mu) + 4 * mu / a**3)
+outer = trimesh.creation.icosphere(subdivisions=5, radius=b)
+inner = trimesh.creation.icosphere(subdivisions=5, radius=a)
+inner.invert()
+mesh = trimesh.util.concatenate([outer, inner]).export(file_type="stl")
+x = np.random.default_rng(3).uniform(-1, 1, (20000, 3))
+r = np.linalg.norm(x, axis=1)
+probes = x[(r > 0.55) & (r < 0.95)][:500]
+rp = np.linalg.norm(probes, axis=1)
+if free:
+    B = 1.0 / (4 * mu * (1 / a**3 - 1 / b**3)); A = 4 * mu * B / ((3 * lam + 2 * mu) * b**3)
+else:
+    A = -B
+exact = ((A * rp + B / rp**2) / rp)[:, None] * probes
+for h in hs:
+    t = time.time()
+    spec = {"dimension": 3, "geometry": {"mesh": "s.stl"}, "grid": {"cell_size": h, "padding": 1},
+            "material": {"youngs_modulus": 1.0, "poisson_ratio": nu}, "method": {"kind": "staggered", "solver": "direct" if h > 0.03 else "iterative"},
+            "boundaries": [{"kind": "pressure", "name": "inner", "value": 1.0,
+                            "region": {"sphere": {"center": [0, 0, 0], "radius": 0.75}}},
+                           ] + ([] if free else [{"kind": "displacement", "name": "clamp", "value": [0, 0, 0], "region": {"all": True}}]),
+            "solver": {"rtol": 1e-10}, "output": {"fields": ["displacement"], "probes": probes.tolist(), "surface": False}}
+    fn = Functions(regions={} if free else {"clamp": lambda p: np.linalg.norm(p, axis=1) > 0.98})
+    res = simulate(spec, mesh, filename="s.stl", functions=fn)
+    u = res.fields.probes["displacement"]
+    print(h, float(np.sqrt(np.sum((u - exact) ** 2) / np.sum(exact**2))), round(time.time() - t, 1), flush=True)
+    deep = (rp > a + 2 * h) & (rp < b - 2 * h)
+    print("  deep", deep.sum(), float(np.sqrt(np.sum((u[deep] - exact[deep]) ** 2) / np.sum(exact[deep]**2))))
+    ur = np.einsum("ij,ij->i", u, probes) / rp; ue = np.einsum("ij,ij->i", exact, probes) / rp
+    for lo_, hi_ in ((0.55, 0.65), (0.65, 0.8), (0.8, 0.95)):
+        s_ = (rp > lo_) & (rp < hi_)
+        print("  r in", lo_, hi_, "ratio mean", np.mean(ur[s_] / ue[s_]), "std", np.std(ur[s_] / ue[s_]))
