@@ -60,15 +60,23 @@ def correction(cell, h, lam, mu, origin, edges=None):
         out = np.zeros(len(J), bool)
         out[ok] = act[a][tuple(J[ok].T)]
         return out
+    def iswet(a, J):
+        if G.get("wet") is None or not G.get("wetonly"):
+            return isact(a, J)
+        ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
+        out = np.zeros(len(J), bool)
+        out[ok] = G["wet"][a][tuple(J[ok].T)]
+        return out & isact(a, J)
+
     def slope(a, k, J):
         """rows: list of (row index, gid, coef) giving slope_k of u_a at face samples J [n, d] times h"""
         up, dn = J + eye[k], J - eye[k]
-        au, ad = isact(a, up), isact(a, dn)
+        au, ad = iswet(a, up), iswet(a, dn)
         c = isact(a, J)
         terms = []
         both = au & ad
         terms.append((both, up, 0.5)); terms.append((both, dn, -0.5))
-        au2, ad2 = isact(a, J + 2 * eye[k]), isact(a, J - 2 * eye[k])
+        au2, ad2 = iswet(a, J + 2 * eye[k]), iswet(a, J - 2 * eye[k])
         ou = au & ~ad & c
         if G.get("order2", False):
             o2 = ou & au2
@@ -82,6 +90,14 @@ def correction(cell, h, lam, mu, origin, edges=None):
             od = od & ~ad2
         terms.append((od, J, 1.0)); terms.append((od, dn, -1.0))
         return terms
+    if G.get("skipheld") and G.get("heldmask") is not None and G["heldmask"].shape == cut.shape:
+        cut = cut & ~G["heldmask"]
+    if os.environ.get("SKIPINNER") == "1":
+        cc_ = np.asarray(origin) + h * (np.indices(cut.shape).reshape(d, -1).T + 0.5)
+        cut = cut & (np.linalg.norm(cc_, axis=1).reshape(cut.shape) > 0.75)
+    if os.environ.get("SKIPOUTER") == "1":
+        cc_ = np.asarray(origin) + h * (np.indices(cut.shape).reshape(d, -1).T + 0.5)
+        cut = cut & (np.linalg.norm(cc_, axis=1).reshape(cut.shape) < 0.75)
     cells = np.argwhere(cut)
     I = cells
     rows, cols, vals = [], [], []
@@ -205,9 +221,34 @@ assembly.stiffness = stiffness
 _orig_init = multigrid.CoarseSolver.__init__
 
 
+def _set_held(level):
+    if level.hold is None or level.origin is None:
+        return
+    lay = level.layout
+    h = level.spacing
+    x = level.hold.quadrature(2 * h).points
+    I = np.floor((x - np.asarray(level.origin)) / h).astype(np.int64)
+    mask = np.zeros(tuple(lay.box), bool)
+    d = level.dim
+    import itertools as _it
+    for off in _it.product((-1, 0, 1), repeat=d):
+        J = I + np.asarray(off)
+        ok = np.all((J >= 0) & (J < np.asarray(lay.box)), axis=1)
+        mask[tuple(J[ok].T)] = True
+    G["heldmask"] = mask
+
+
+def _set_wet(level):
+    _set_held(level)
+    lay = level.layout
+    if level.vf_host is not None:
+        G["wet"] = [lay.dense(level.vf_host[a] >= 0.5) for a in range(level.dim)]
+
+
 def build_proto(level, comp_free=None):
     lay = level.layout
     G["act"] = [lay.dense(level.active[a]) for a in range(level.dim)]
+    _set_wet(level)
     d = lay.dim
     cells = tuple(n - 1 for n in lay.box)
     idx = lay.indices()
@@ -230,6 +271,7 @@ def build_proto(level, comp_free=None):
 
 def init(self, level, name="coarsest multigrid level"):
     G["act"] = [level.layout.dense(level.active[a]) for a in range(level.dim)]
+    _set_wet(level)
     _orig_init(self, level, name)
     if G.get("grid") is None or abs(level.spacing - G["grid"].spacing) < 1e-12 * level.spacing:
         build_proto(level)
@@ -338,6 +380,7 @@ def _div(self, load, points, f):
     d = lay.dim
     cell = lay.dense(level.vc_host)
     G["act"] = [lay.dense(level.active[a]) for a in range(d)]
+    _set_wet(level)
     correction(np.asarray(cell), level.spacing, level.lam, level.mu, G["origin"])
     dR, w, I, box, n = G["dR"]
     h = level.spacing

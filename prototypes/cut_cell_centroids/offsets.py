@@ -10,7 +10,7 @@ on = sys.argv[2] == "on" if len(sys.argv) > 2 else True
 offs = (0.0, 1e-6, 1e-4, 1e-2, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.99, 1 - 1e-4, 1 - 1e-6)
 h = WIDTH / cells
 grid = offset_grid((round(LENGTH / h), cells, cells), h)
-cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["flux"] = os.environ.get("FLUX") == "1"; cutstrain.G["jhold"] = os.environ.get("JHOLD") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"
+cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["flux"] = os.environ.get("FLUX") == "1"; cutstrain.G["jhold"] = os.environ.get("JHOLD") == "1"; cutstrain.G["wetonly"] = os.environ.get("WET") == "1"; cutstrain.G["skipheld"] = os.environ.get("SKIPHELD") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"
 import os; cutstrain.G["beta"] = float(os.environ.get("BETA", "0.05")); cutstrain.G["second"] = os.environ.get("SECOND") == "1"
 cutstrain.G["origin"] = np.asarray(grid.origin, float)
 tips = []
