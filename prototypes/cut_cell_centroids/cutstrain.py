@@ -283,7 +283,10 @@ _orig_mg = multigrid.Multigrid.__init__
 def mg_init(self, fine, **kw):
     _orig_mg(self, fine, **kw)
     if getattr(fine, "_proto", None) is None and G["on"]:
-        build_proto(fine)
+        if G.get("jhold") and fine.surface is not None:
+            build_proto_j(fine)
+        else:
+            build_proto(fine)
 
 
 multigrid.Multigrid.__init__ = mg_init
@@ -559,6 +562,7 @@ def build_proto_j(level):
     lay = level.layout
     d = lay.dim
     G["act"] = [lay.dense(level.active[a]) for a in range(d)]
+    _set_wet(level)
     cells = tuple(n - 1 for n in lay.box)
     idx = lay.indices()
     pos = np.nonzero(np.all(idx < np.asarray(lay.box), axis=1))[0]
@@ -590,3 +594,14 @@ def init_j(self, level, name="coarsest multigrid level"):
 
 
 multigrid.CoarseSolver.__init__ = init_j
+
+
+def configure_from_env():
+    """The switches of the README from the environment (scripts call this after setting on / slice)."""
+    e = os.environ.get
+    G["beta"] = float(e("BETA", "0.05"))
+    for key, var in (("muonly", "MUONLY"), ("shear", "SHEAR"), ("second", "SECOND"), ("extend", "EXTEND"),
+                     ("wetonly", "WET"), ("skipheld", "SKIPHELD"), ("jhold", "JHOLD"), ("flux", "FLUX"),
+                     ("order2", "ORDER2")):
+        G[key] = e(var) == "1"
+    G["along"] = e("ALONG", "1") == "1"

@@ -11,7 +11,7 @@ offs = tuple(float(v) for v in os.environ.get("OFFS", "0,1e-6,1e-4,1e-2,0.1,0.2,
 h = WIDTH / cells
 grid = offset_grid((round(LENGTH / h), cells, cells), h)
 cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["flux"] = os.environ.get("FLUX") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"; cutstrain.G["slice"] = on
-import os; cutstrain.G["beta"] = float(os.environ.get("BETA", "0.05")); cutstrain.G["shear"] = os.environ.get("SHEAR") == "1"; cutstrain.G["along"] = os.environ.get("ALONG", "1") == "1"; cutstrain.G["second"] = os.environ.get("SECOND") == "1"; cutstrain.G["extend"] = os.environ.get("EXTEND") == "1"; cutstrain.G["wetonly"] = os.environ.get("WET") == "1"
+import os; cutstrain.G["beta"] = float(os.environ.get("BETA", "0.05")); cutstrain.G["shear"] = os.environ.get("SHEAR") == "1"; cutstrain.G["along"] = os.environ.get("ALONG", "1") == "1"; cutstrain.G["second"] = os.environ.get("SECOND") == "1"; cutstrain.G["extend"] = os.environ.get("EXTEND") == "1"; cutstrain.G["wetonly"] = os.environ.get("WET") == "1"; cutstrain.G["skipheld"] = os.environ.get("SKIPHELD") == "1"; cutstrain.G["jhold"] = os.environ.get("JHOLD") == "1"
 cutstrain.G["origin"] = np.asarray(grid.origin, float)
 tips = []
 for off in offs:

@@ -7,6 +7,7 @@ from engine.pipeline import Functions
 on = sys.argv[1] == "on"
 h = float(sys.argv[2]) if len(sys.argv) > 2 else 0.1
 cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"; import os; cutstrain.G["shear"] = os.environ.get("SHEAR") == "1"; cutstrain.G["slice"] = on
+cutstrain.configure_from_env()
 nu = 0.3; lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu)); K = lam + 2 * mu / 3
 mesh = trimesh.creation.icosphere(subdivisions=4, radius=1.0); mesh.apply_translation([0.013, -0.021, 0.007])
 x = np.random.default_rng(3).uniform(-1, 1, (5000, 3)); x = x[np.linalg.norm(x - mesh.centroid, axis=1) < 0.9][:300]
