@@ -245,7 +245,8 @@ def _set_wet(level):
         G["wet"] = [lay.dense(level.vf_host[a] >= 0.5) for a in range(level.dim)]
 
 
-def build_proto(level, comp_free=None):
+def build_proto(level, jhold=False):
+    """The fine level's operator K (+ the correction) + S on its free DOFs, kept as ``level._proto``."""
     lay = level.layout
     G["act"] = [lay.dense(level.active[a]) for a in range(level.dim)]
     _set_wet(level)
@@ -261,12 +262,15 @@ def build_proto(level, comp_free=None):
     cell = lay.dense(level.vc_host)
     edges = {p: lay.dense(level.ve_host[q]) for q, p in enumerate(multigrid.axis_pairs(d))}
     K = assembly.stiffness(cell, edges, level.spacing, level.lam, level.mu).tocsr()
+    if jhold and level.surface is not None:
+        K = K + jprime_hold(level)
     order = gidv[free]
-    A = K[order][:, order]
+    A = K[order][:, order].tocsr()
     fc, fp = comp[free], flat_pos[free]
-    if level.surface is not None:
+    if level.surface is not None and not jhold:
         A = A + multigrid._on_free(level.surface, level.surface.matrix(), fc, fp, level.size)
     level._proto = (A.tocsr(), fc, fp)
+    return level._proto[0]
 
 
 def init(self, level, name="coarsest multigrid level"):
@@ -559,27 +563,8 @@ def jprime_hold(level):
 
 
 def build_proto_j(level):
-    lay = level.layout
-    d = lay.dim
-    G["act"] = [lay.dense(level.active[a]) for a in range(d)]
-    _set_wet(level)
-    cells = tuple(n - 1 for n in lay.box)
-    idx = lay.indices()
-    pos = np.nonzero(np.all(idx < np.asarray(lay.box), axis=1))[0]
-    idx = idx[pos]
-    comp = np.repeat(np.arange(d), len(idx))
-    flat_pos = np.tile(pos, d)
-    free = level.free[comp, flat_pos]
-    gidv = assembly.dof_index(comp, np.tile(idx, (d, 1)), cells)
-    cell = lay.dense(level.vc_host)
-    edges = {p: lay.dense(level.ve_host[q]) for q, p in enumerate(multigrid.axis_pairs(d))}
-    K = assembly.stiffness(cell, edges, level.spacing, level.lam, level.mu).tocsr()
-    if level.surface is not None:
-        K = K + jprime_hold(level)
-    order = gidv[free]
-    A = K[order][:, order].tocsr()
-    level._proto = (A, comp[free], flat_pos[free])
-    return A
+    """build_proto with the hold read through J' (``jprime_hold``)."""
+    return build_proto(level, jhold=True)
 
 
 _init_before_j = multigrid.CoarseSolver.__init__

@@ -7,9 +7,10 @@ from engine.pipeline import Functions
 on = sys.argv[1] == "on"
 free = len(sys.argv) > 3 and sys.argv[3] == "free"
 hs = [float(x) for x in sys.argv[2].split(",")] if len(sys.argv) > 2 else [0.1, 0.05, 0.025]
-cutstrain.G["on"] = on; import os; cutstrain.G["muonly"] = os.environ.get("MUONLY") == "1"; cutstrain.G["flux"] = os.environ.get("FLUX") == "1"; cutstrain.G["jhold"] = os.environ.get("JHOLD") == "1"; cutstrain.G["wetonly"] = os.environ.get("WET") == "1"; cutstrain.G["skipheld"] = os.environ.get("SKIPHELD") == "1"; cutstrain.G["order2"] = os.environ.get("ORDER2") == "1"; import os; cutstrain.G["shear"] = os.environ.get("SHEAR") == "1"
+import os
+cutstrain.G["on"] = on
 cutstrain.G["slice"] = on
-import os; cutstrain.G["beta"] = float(os.environ.get("BETA", "0.05")); cutstrain.G["second"] = os.environ.get("SECOND") == "1"; cutstrain.G["extend"] = os.environ.get("EXTEND") == "1"; cutstrain.G["wetonly"] = os.environ.get("WET") == "1"; cutstrain.G["along"] = os.environ.get("ALONG", "1") == "1"
+cutstrain.configure_from_env()
 a, b, nu = 0.5, 1.0, 0.3
 lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))
 B = 1.0 / ((3 * lam + 2 * mu) + 4 * mu / a**3)
