@@ -28,20 +28,25 @@ def box_moments(lo, hi):
     return f
 
 
+def _moved(V):
+    """Control volumes whose strains move: the cut ones, with EXTEND also those beside a cut or empty one."""
+    if not G.get("extend"):
+        return (V > 1e-12) & (V < 1 - 1e-12)
+    notfull = V < 1 - 1e-12
+    near = notfull.copy()
+    for k in range(V.ndim):
+        for sh in (1, -1):
+            near |= np.roll(notfull, sh, axis=k)
+    return (V > 1e-12) & near
+
+
 def correction(cell, h, lam, mu, origin, edges=None):
     box = cell.shape
     d = len(box)
     P = math.prod(box)
     V, cen = G["moments"](origin, h, box)
     Vc = cell
-    cut = (Vc > 1e-12) & (Vc < 1 - 1e-12)
-    if G.get("extend"):
-        notfull = Vc < 1 - 1e-12
-        near = notfull.copy()
-        for k in range(d):
-            for sh in (1, -1):
-                near |= np.roll(notfull, sh, axis=k)
-        cut = (Vc > 1e-12) & near
+    cut = _moved(Vc)
     # active DOF (a, J): cell J or J - e_a has material
     act = []
     for a in (range(d) if G.get("act") is None else []):
@@ -149,14 +154,7 @@ def correction(cell, h, lam, mu, origin, edges=None):
     if G.get("shear") and edges is not None and "edge_moments" in G:
         for (pa, pb), Ve in edges.items():
             Ve = np.asarray(Ve)
-            cutE = (Ve > 1e-12) & (Ve < 1 - 1e-12)
-            if G.get("extend"):
-                nf = Ve < 1 - 1e-12
-                nearE = nf.copy()
-                for k in range(d):
-                    for sh in (1, -1):
-                        nearE |= np.roll(nf, sh, axis=k)
-                cutE = (Ve > 1e-12) & nearE
+            cutE = _moved(Ve)
             E = np.argwhere(cutE)
             ne = len(E)
             if not ne:
