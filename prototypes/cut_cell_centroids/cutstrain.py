@@ -28,6 +28,16 @@ def box_moments(lo, hi):
     return f
 
 
+def _curvature(a, b, J0, J1, isact, eye):
+    """(mask, samples, coefficient) of h^2 d_bb u_a between the samples J0 and J1 = J0 + e_b: central
+    from the samples beyond both, else one-sided."""
+    lo_, hi_ = isact(a, J0 - eye[b]), isact(a, J1 + eye[b])
+    both = lo_ & hi_; olo = lo_ & ~hi_; ohi = hi_ & ~lo_
+    return [(both, J1 + eye[b], 0.5), (both, J1, -0.5), (both, J0, -0.5), (both, J0 - eye[b], 0.5),
+            (olo, J1, 1.0), (olo, J0, -2.0), (olo, J0 - eye[b], 1.0),
+            (ohi, J1 + eye[b], 1.0), (ohi, J1, -2.0), (ohi, J0, 1.0)]
+
+
 def _moved(V):
     """Control volumes whose strains move: the cut ones, with EXTEND also those beside a cut or empty one."""
     if not G.get("extend"):
@@ -117,12 +127,7 @@ def correction(cell, h, lam, mu, origin, edges=None):
         if G.get("along", True):
             m = cen[tuple(I.T)][:, a]
             J0, J1 = I, I + eye[a]
-            lo_, hi_ = isact(a, J0 - eye[a]), isact(a, J1 + eye[a])
-            both = lo_ & hi_; olo = lo_ & ~hi_; ohi = hi_ & ~lo_
-            terms = [(both, J1 + eye[a], 0.5), (both, J1, -0.5), (both, J0, -0.5), (both, J0 - eye[a], 0.5),
-                     (olo, J1, 1.0), (olo, J0, -2.0), (olo, J0 - eye[a], 1.0),
-                     (ohi, J1 + eye[a], 1.0), (ohi, J1, -2.0), (ohi, J0, 1.0)]
-            for mask, JJ, c in terms:
+            for mask, JJ, c in _curvature(a, a, J0, J1, isact, eye):
                 sel = mask & (m != 0)
                 rows.append(a * n + ridx[sel]); cols.append(gid(a, JJ[sel])); vals.append(c * m[sel] / h)
                 Drows[a].append(a * n + ridx[mask]); Dcols[a].append(gid(a, JJ[mask])); Dvals[a].append(np.full(mask.sum(), c / h))
@@ -174,12 +179,7 @@ def correction(cell, h, lam, mu, origin, edges=None):
                 for k in range(d):
                     m = mE[:, k]
                     if k == b:  # along b: curvature of u_a across the two samples
-                        lo_, hi_ = isact(a, J0 - eye[b]), isact(a, J1 + eye[b])
-                        both = lo_ & hi_; olo = lo_ & ~hi_; ohi = hi_ & ~lo_
-                        terms = [(both, J1 + eye[b], 0.5), (both, J1, -0.5), (both, J0, -0.5), (both, J0 - eye[b], 0.5),
-                                 (olo, J1, 1.0), (olo, J0, -2.0), (olo, J0 - eye[b], 1.0),
-                                 (ohi, J1 + eye[b], 1.0), (ohi, J1, -2.0), (ohi, J0, 1.0)]
-                        for mask, JJ, c in terms:
+                        for mask, JJ, c in _curvature(a, b, J0, J1, isact, eye):
                             sel = mask & (m != 0)
                             rr.append(er[sel]); cc.append(gid(a, JJ[sel])); vv.append(0.5 * c * m[sel] / h)
                             DR[k].append(er[mask]); DC[k].append(gid(a, JJ[mask])); DV[k].append(np.full(mask.sum(), 0.5 * c / h))
