@@ -84,27 +84,7 @@ def correction(cell, h, lam, mu, origin, edges=None):
         return out & isact(a, J)
 
     def slope(a, k, J):
-        """rows: list of (row index, gid, coef) giving slope_k of u_a at face samples J [n, d] times h"""
-        up, dn = J + eye[k], J - eye[k]
-        au, ad = iswet(a, up), iswet(a, dn)
-        c = isact(a, J)
-        terms = []
-        both = au & ad
-        terms.append((both, up, 0.5)); terms.append((both, dn, -0.5))
-        au2, ad2 = iswet(a, J + 2 * eye[k]), iswet(a, J - 2 * eye[k])
-        ou = au & ~ad & c
-        if G.get("order2", False):
-            o2 = ou & au2
-            terms += [(o2, J + 2 * eye[k], -0.5), (o2, up, 2.0), (o2, J, -1.5)]
-            ou = ou & ~au2
-        terms.append((ou, up, 1.0)); terms.append((ou, J, -1.0))
-        od = ad & ~au & c
-        if G.get("order2", False):
-            o2 = od & ad2
-            terms += [(o2, J - 2 * eye[k], 0.5), (o2, dn, -2.0), (o2, J, 1.5)]
-            od = od & ~ad2
-        terms.append((od, J, 1.0)); terms.append((od, dn, -1.0))
-        return terms
+        return _slopes(a, k, J, iswet, isact, eye, G.get("order2", False))
     if G.get("skipheld") and G.get("heldmask") is not None and G["heldmask"].shape == cut.shape:
         cut = cut & ~G["heldmask"]
     if os.environ.get("SKIPINNER") == "1":
@@ -489,13 +469,20 @@ _ni._stress_rows = _stress_rows
 from engine.grid import axis_pairs as _pairs
 
 
-def _slope_terms(a, k, J, isact, eye):
+def _slopes(a, k, J, near, here, eye, order2=False):
+    """(mask, samples, coefficient) of h d_k u_a at the samples J [n, d]: central where ``near`` holds on
+    both sides, else one-sided (three samples with ``order2``) from the sample itself (``here``)."""
     up, dn = J + eye[k], J - eye[k]
-    au, ad, c = isact(a, up), isact(a, dn), isact(a, J)
+    au, ad, c = near(a, up), near(a, dn), here(a, J)
     both = au & ad
-    ou = au & ~ad & c
-    od = ad & ~au & c
-    return [(both, up, 0.5), (both, dn, -0.5), (ou, up, 1.0), (ou, J, -1.0), (od, J, 1.0), (od, dn, -1.0)]
+    ou, od = au & ~ad & c, ad & ~au & c
+    terms = [(both, up, 0.5), (both, dn, -0.5)]
+    if order2:
+        o2u, o2d = ou & near(a, J + 2 * eye[k]), od & near(a, J - 2 * eye[k])
+        terms += [(o2u, J + 2 * eye[k], -0.5), (o2u, up, 2.0), (o2u, J, -1.5),
+                  (o2d, J - 2 * eye[k], 0.5), (o2d, dn, -2.0), (o2d, J, 1.5)]
+        ou, od = ou & ~o2u, od & ~o2d
+    return terms + [(ou, up, 1.0), (ou, J, -1.0), (od, J, 1.0), (od, dn, -1.0)]
 
 
 def jprime_hold(level):
@@ -548,7 +535,7 @@ def jprime_hold(level):
                 if k == a:
                     continue
                 t = (x[:, k] - (origin[k] + h * (I[:, k] + 0.5))) / h
-                for mask, JJ, c in _slope_terms(a, k, Jf, isact, eye):
+                for mask, JJ, c in _slopes(a, k, Jf, isact, isact, eye):
                     rr.append(qs[mask]); cc.append(gid(a, JJ[mask])); vv.append(lf[mask] * t[mask] * c)
         Phi = sp.csr_matrix((np.concatenate(vv), (np.concatenate(rr), np.concatenate(cc))), shape=(Q, N))
         ma = quad.mask[:, a]
