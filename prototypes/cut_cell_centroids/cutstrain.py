@@ -28,6 +28,16 @@ def box_moments(lo, hi):
     return f
 
 
+def _lookup(arrays, box):
+    """f(a, J [n, d]) -> arrays[a] at J, False outside the index box."""
+    def at(a, J):
+        ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
+        out = np.zeros(len(J), bool)
+        out[ok] = arrays[a][tuple(J[ok].T)]
+        return out
+    return at
+
+
 def _curvature(a, b, J0, J1, isact, eye):
     """(mask, samples, coefficient) of h^2 d_bb u_a between the samples J0 and J1 = J0 + e_b: central
     from the samples beyond both, else one-sided."""
@@ -70,18 +80,11 @@ def correction(cell, h, lam, mu, origin, edges=None):
     eye = np.eye(d, dtype=int)
     def gid(a, J):
         return a * P + np.ravel_multi_index(tuple(J.T), box)
-    def isact(a, J):
-        ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
-        out = np.zeros(len(J), bool)
-        out[ok] = act[a][tuple(J[ok].T)]
-        return out
+    isact = _lookup(act, box)
+    wet = _lookup(G["wet"], box) if G.get("wet") is not None and G.get("wetonly") else None
+
     def iswet(a, J):
-        if G.get("wet") is None or not G.get("wetonly"):
-            return isact(a, J)
-        ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
-        out = np.zeros(len(J), bool)
-        out[ok] = G["wet"][a][tuple(J[ok].T)]
-        return out & isact(a, J)
+        return isact(a, J) if wet is None else wet(a, J) & isact(a, J)
 
     def slope(a, k, J):
         return _slopes(a, k, J, iswet, isact, eye, G.get("order2", False))
@@ -493,13 +496,7 @@ def jprime_hold(level):
     N = d * P
     origin = np.asarray(level.origin, float)
     eye = np.eye(d, dtype=int)
-    act = [np.asarray(x, bool) for x in G["act"]]
-
-    def isact(a, J):
-        ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
-        out = np.zeros(len(J), bool)
-        out[ok] = act[a][tuple(J[ok].T)]
-        return out
+    isact = _lookup([np.asarray(x, bool) for x in G["act"]], box)
 
     def gid(a, J):
         return a * P + np.ravel_multi_index(tuple(np.clip(J, 0, np.asarray(box) - 1).T), box)
