@@ -328,27 +328,28 @@ def _post(self, fractions):
 _el.StaggeredElasticity.__post_init__ = _post
 
 
+def _box_moments(cut, box):
+    """(V [box], centroid offsets [box, d] in h, central second moments [box, d, d] in h^2 units times V)
+    of the pieces of ``cut`` summed per cell of the index box."""
+    d = 3
+    ex = cut.exponents
+    col = lambda e: int(np.nonzero((ex == e).all(1))[0][0])  # noqa: E731
+    pc = tuple(cut.piece_cell.T)
+    V = np.zeros(box); M = np.zeros(box + (d,)); M2 = np.zeros(box + (d, d))
+    np.add.at(V, pc, cut.moments[:, col(np.zeros(d, int))])
+    eye = np.eye(d, dtype=int)
+    for j in range(d):
+        np.add.at(M[..., j], pc, cut.moments[:, col(eye[j])])
+        for k in range(d):
+            np.add.at(M2[..., j, k], pc, cut.moments[:, col(eye[j] + eye[k])])
+    cen = np.where(V[..., None] > 0, M / np.maximum(V, 1e-300)[..., None], 0.0)
+    return V, cen, M2 - V[..., None, None] * cen[..., :, None] * cen[..., None, :]
+
+
 def sliced_moments(surface, grid):
     from engine.geometry.slicing import slice_cells
-    cut = slice_cells(surface, grid, degree=2)
     box = tuple(n + 1 for n in grid.shape)
-    d = 3
-    V = np.zeros(box); M = np.zeros(box + (d,))
-    ex = cut.exponents
-    cols = [int(np.nonzero((ex == np.eye(d, dtype=int)[k]).all(1))[0][0]) for k in range(d)]
-    c0 = int(np.nonzero((ex == 0).all(1))[0][0])
-    pc = tuple(cut.piece_cell.T)
-    np.add.at(V, pc, cut.moments[:, c0])
-    for k in range(d):
-        np.add.at(M[..., k], pc, cut.moments[:, cols[k]])
-    cen = np.where(V[..., None] > 0, M / np.maximum(V, 1e-300)[..., None], 0.0)
-    M2 = np.zeros(box + (d, d))
-    for j in range(d):
-        for k in range(d):
-            e = np.eye(d, dtype=int)[j] + np.eye(d, dtype=int)[k]
-            col = int(np.nonzero((ex == e).all(1))[0][0])
-            np.add.at(M2[..., j, k], pc, cut.moments[:, col])
-    G["S"] = M2 - V[..., None, None] * cen[..., :, None] * cen[..., None, :]
+    V, cen, G["S"] = _box_moments(slice_cells(surface, grid, degree=2), box)
 
     def f(origin, h, boxshape):
         assert tuple(boxshape) == box, (boxshape, box)
@@ -405,24 +406,8 @@ def edge_moments(surface, grid):
             s_ = np.eye(d)[a] + np.eye(d)[b]
             g2 = Grid(origin=tuple(np.asarray(grid.origin) - 0.5 * grid.spacing * s_), spacing=grid.spacing,
                       shape=tuple(int(n + o) for n, o in zip(grid.shape, s_)))
-            cut = slice_cells(surface, g2, degree=2)
-            V = np.zeros(box); M = np.zeros(box + (d,))
-            ex = cut.exponents
-            c0 = int(np.nonzero((ex == 0).all(1))[0][0])
-            pc = tuple(cut.piece_cell.T)
-            np.add.at(V, pc, cut.moments[:, c0])
-            for k in range(d):
-                col = int(np.nonzero((ex == np.eye(d, dtype=int)[k]).all(1))[0][0])
-                np.add.at(M[..., k], pc, cut.moments[:, col])
-            cen = np.where(V[..., None] > 0, M / np.maximum(V, 1e-300)[..., None], 0.0)
-            out[(a, b)] = cen
-            M2 = np.zeros(box + (d, d))
-            for j in range(d):
-                for k in range(d):
-                    e = np.eye(d, dtype=int)[j] + np.eye(d, dtype=int)[k]
-                    col = int(np.nonzero((ex == e).all(1))[0][0])
-                    np.add.at(M2[..., j, k], pc, cut.moments[:, col])
-            G.setdefault("edge_S", {})[(a, b)] = M2 - V[..., None, None] * cen[..., :, None] * cen[..., None, :]
+            _, out[(a, b)], S = _box_moments(slice_cells(surface, g2, degree=2), box)
+            G.setdefault("edge_S", {})[(a, b)] = S
     return out
 
 # ---- the hold's flux from the moved strains (mu part)
