@@ -5,7 +5,7 @@ import cutstrain
 from engine import simulate
 from engine.staggered import elasticity as el, assembly
 h = float(sys.argv[1])
-cutstrain.G["on"] = True; cutstrain.G["slice"] = True; cutstrain.G["along"] = os.environ.get("ALONG", "1") == "1"
+cutstrain.G["on"] = True; cutstrain.G["slice"] = True; cutstrain.configure_from_env()
 outer = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
 inner = trimesh.creation.icosphere(subdivisions=5, radius=0.5); inner.invert()
 mesh = trimesh.util.concatenate([outer, inner]).export(file_type="stl")
