@@ -312,6 +312,16 @@ def _refine(facets: np.ndarray, longest: float) -> np.ndarray:
     return np.concatenate(done) if done else facets
 
 
+def facet_measures(facets: np.ndarray) -> np.ndarray:
+    """Area [m^2] (3D triangles) or length [m] (2D segments) [M] of simplices [M, d, d]."""
+    return _measure_and_normal(np.asarray(facets, dtype=float))[0]
+
+
+def subdivided(facets: np.ndarray, longest: float) -> np.ndarray:
+    """Facets [M, d, d] cut by edge midpoints into pieces [K, d, d] whose edges are at most ``longest`` [m]."""
+    return _refine(np.asarray(facets, dtype=float).reshape(-1, facets.shape[-1], facets.shape[-1]), longest)
+
+
 def _measure_and_normal(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Area / length [M] and unit outward normal [M, d] of simplices [M, d, d] (zero normal if degenerate).
 

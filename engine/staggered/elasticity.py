@@ -36,6 +36,7 @@ from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
 from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
 from .problem import solves_directly
+from .shares import patch_shares
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -170,7 +171,7 @@ class StaggeredElasticity(StaggeredFields):
         bodies = self._body_lookup() if quadrature else None
         for load in self.surface_loads:
             if load.form == "divergence":
-                self._divergence_load(load, points, f)
+                self._divergence_load(load, f)
                 continue
             pts, w, t, _ = self._load_points[id(load)]
             spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, name=load.name)
@@ -180,15 +181,17 @@ class StaggeredElasticity(StaggeredFields):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
 
-    def _divergence_load(self, load: SurfaceLoad, points: np.ndarray, f: np.ndarray) -> None:
+    def _divergence_load(self, load: SurfaceLoad, f: np.ndarray) -> None:
         """Add to ``f`` [d, size] the work of sigma n on the surface written as a volume integral
         (thesis eq. 4.16): int_Omega sigma : grad u + div(sigma) . u, discretised with the
         operator's own weights and the staggered divergence. It equals the operator's residual of a
         constant stress exactly, so the discrete traction and the discrete energy agree cell by
-        cell. Only rows whose sample lies within h/2 of ``load.region`` get it, and of those only
-        the ones where a fraction their terms weigh is below 1 (elsewhere the terms cancel): the
-        stress field is evaluated there alone, CHUNK rows at a time: over the whole index box, the
-        ball's stress field at h = 1/128 came as several [17 M, 3, 3] arrays at once."""
+        cell. A row's terms see all the surface crossing its control volumes, so each row's force is
+        scaled by its share of ``load``'s patch (``shares.py``): 1 where the row sees the patch
+        alone, 0 off it. Of the rows that see the patch only those where a fraction their terms weigh
+        is below 1 get it (elsewhere the terms cancel): the stress field is evaluated there alone,
+        CHUNK rows at a time: over the whole index box, the ball's stress field at h = 1/128 came as
+        several [17 M, 3, 3] arrays at once."""
         level, grid, d, h = self.level, self.grid, self.dim, self.grid.spacing
         if load.pressure is not None:
             stress_field = lambda x: np.broadcast_to(-float(load.pressure) * np.eye(d), (len(x), d, d))  # noqa: E731
@@ -200,7 +203,7 @@ class StaggeredElasticity(StaggeredFields):
         box = np.asarray(lay.box)
         origin = np.asarray(grid.origin, dtype=float)
         eye = np.eye(d, dtype=np.int64)
-        near = np.asarray(load.region.contains(points, slack=0.5 * h), dtype=bool)
+        shares = patch_shares(self.surface, load, grid, lay)
 
         def at(values: np.ndarray, index: np.ndarray) -> np.ndarray:
             """values [size] at grid indices [N, d]; 0 outside the kept tiles."""
@@ -216,7 +219,9 @@ class StaggeredElasticity(StaggeredFields):
         cell = np.zeros(d, dtype=np.int64)
         for a in range(d):
             sides = [(q, pair[1] if pair[0] == a else pair[0]) for q, pair in enumerate(axis_pairs(d)) if a in pair]
-            pos = self.dof_pos[near & (self.dof_comp == a)]
+            pos, share = shares[a]
+            on = level.active[a, pos]
+            pos, share = pos[on], share[on]
             index = lay.index_of(pos).astype(np.int64)
             # row (a, I) weighs vc(I), vc(I - e_a), vf_a(I) and, per pair (a, j), ve(I), ve(I + e_j)
             weights = [level.vc_host[pos], at(level.vc_host, index - eye[a]), level.vf_host[a, pos]]
@@ -225,7 +230,7 @@ class StaggeredElasticity(StaggeredFields):
             cut = np.zeros(len(pos), dtype=bool)
             for w in weights:
                 cut |= w != 1.0
-            pos, index, weights = pos[cut], index[cut], [w[cut] for w in weights]
+            pos, index, share, weights = pos[cut], index[cut], share[cut], [w[cut] for w in weights]
             for start in range(0, len(pos), CHUNK):
                 rows = slice(start, start + CHUNK)
                 here, vc, vc_dn, vf = index[rows], weights[0][rows], weights[1][rows], weights[2][rows]
@@ -236,7 +241,7 @@ class StaggeredElasticity(StaggeredFields):
                     edge = eye[a] + eye[j]
                     s_ab, s_up = stress(here, edge, a, j), stress(here + eye[j], edge, a, j)
                     value += ve * s_ab - ve_up * s_up - vf * (s_ab - s_up)
-                f[a, pos[rows]] += h ** (d - 1) * value
+                f[a, pos[rows]] += h ** (d - 1) * share[rows] * value
 
     def _active_lookup(self, a: int, index: np.ndarray) -> np.ndarray:
         pos = self.level.layout.positions(index)
