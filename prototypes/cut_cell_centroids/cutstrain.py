@@ -90,6 +90,8 @@ def correction(cell, h, lam, mu, origin, edges=None):
         return _slopes(a, k, J, iswet, isact, eye, G.get("order2", False))
     if G.get("skipheld") and G.get("heldmask") is not None and G["heldmask"].shape == cut.shape:
         cut = cut & ~G["heldmask"]
+    if G.get("skiploaded") and G.get("loadedmask") is not None and G["loadedmask"].shape == cut.shape:
+        cut = cut & ~G["loadedmask"]
     if os.environ.get("SKIPINNER") == "1":
         cc_ = np.asarray(origin) + h * (np.indices(cut.shape).reshape(d, -1).T + 0.5)
         cut = cut & (np.linalg.norm(cc_, axis=1).reshape(cut.shape) > 0.75)
@@ -315,9 +317,54 @@ from engine.staggered import elasticity as _el
 _orig_post = _el.StaggeredElasticity.__post_init__
 
 
+def _loaded_mask(elastic, grid):
+    """Cells within one cell of a surface load's patch (any form): quadrature points at h / 2."""
+    from engine.boundary import patch_quadrature
+    import itertools as _it
+    box = tuple(n + 1 for n in grid.shape)
+    mask = np.zeros(box, bool)
+    h, d = grid.spacing, grid.dim
+    for load in elastic.surface_loads:
+        x, _, _ = patch_quadrature(elastic.surface, load.region, 0.5 * h, name=load.name)
+        I = np.floor((x - np.asarray(grid.origin)) / h).astype(np.int64)
+        for off in _it.product((-1, 0, 1), repeat=d):
+            J = I + np.asarray(off)
+            ok = np.all((J >= 0) & (J < np.asarray(box)), axis=1)
+            mask[tuple(J[ok].T)] = True
+    return mask
+
+
+def subcell_moments(fractions):
+    """(V, centroid offsets / h) per cell from the h/2 sub-cells' fractions: each sub-cell's solid
+    taken at the sub-cell's centre (an approximation; exact for full sub-cells)."""
+    grid = fractions.grid
+    d = grid.dim
+    box = tuple(n + 1 for n in grid.shape)
+    sub = fractions.subcells.dense()
+    V = np.zeros(box); M = np.zeros(box + (d,))
+    import itertools as _it
+    for off in _it.product((0, 1), repeat=d):
+        part = sub[tuple(slice(o, None, 2) for o in off)] / 2**d
+        sl = tuple(slice(0, n) for n in part.shape)
+        V[sl] += part
+        for k in range(d):
+            M[sl + (k,)] += part * (off[k] - 0.5) * 0.5
+    cen = np.where(V[..., None] > 0, M / np.maximum(V, 1e-300)[..., None], 0.0)
+
+    def f(origin, h, boxshape):
+        assert tuple(boxshape) == box, (boxshape, box)
+        return V, cen
+    return f
+
+
 def _post(self, fractions):
     G["grid"] = fractions.grid
-    if G.get("slice", False):
+    if G.get("skiploaded"):
+        G["loadedmask"] = _loaded_mask(self, fractions.grid)
+    if G.get("subcell") and fractions.subcells is not None:
+        G["moments"] = subcell_moments(fractions)
+        G["origin"] = np.asarray(fractions.grid.origin, float)
+    elif G.get("slice", False):
         G["moments"] = sliced_moments(self.surface, fractions.grid)
         if G.get("shear"):
             G["edge_moments"] = edge_moments(self.surface, fractions.grid)
@@ -360,8 +407,8 @@ def sliced_moments(surface, grid):
 _orig_div = _el.StaggeredElasticity._divergence_load
 
 
-def _div(self, load, points, f):
-    _orig_div(self, load, points, f)
+def _div(self, load, f):
+    _orig_div(self, load, f)
     if not (G["on"] and G["moments"] is not None) or load.pressure is None:
         return
     level = self.level
@@ -554,6 +601,15 @@ def configure_from_env():
     G["beta"] = float(e("BETA", "0.05"))
     for key, var in (("muonly", "MUONLY"), ("shear", "SHEAR"), ("second", "SECOND"), ("extend", "EXTEND"),
                      ("wetonly", "WET"), ("skipheld", "SKIPHELD"), ("jhold", "JHOLD"), ("flux", "FLUX"),
-                     ("order2", "ORDER2")):
+                     ("order2", "ORDER2"), ("skiploaded", "SKIPLOADED"), ("subcell", "SUBCELL")):
         G[key] = e(var) == "1"
     G["along"] = e("ALONG", "1") == "1"
+    if G["subcell"]:
+        keep_subcells()
+
+
+def keep_subcells():
+    """SUBCELL=1: the pipeline's volume fractions keep their h/2 sub-cells (for ``subcell_moments``)."""
+    from engine import pipeline as _pl
+    from engine.geometry.fractions import volume_fractions as _vf
+    _pl._GEOMETRY["fractions"] = ("fractions", lambda s, g: _vf(s, g, keep_subcells=True))
