@@ -131,7 +131,16 @@ def correction(cell, h, lam, mu, origin, edges=None):
                          np.concatenate([gid(a, np.clip(J, 0, np.asarray(box) - 1)) for a in range(d) for J in (I + eye[a], I)]))),
                        shape=(d * n, d * P))
     C = 2 * mu * np.eye(d) + (0.0 if G.get('muonly') else lam) * np.ones((d, d))
-    W = sp.kron(sp.csr_matrix(C), sp.diags(Vc[tuple(I.T)] * h**d))
+    weight = np.ones(n)
+    if G.get("aligned") and (G.get("cellnormal") is not None or os.environ.get("ALIGNFROM") == "centroid"):
+        # moved in full where the cell's surface faces a grid axis, not at all beyond ALIGNED degrees;
+        # ALIGNFROM=centroid: the direction of the solid's centroid offset stands in for the normal
+        nc = G["cellnormal"][tuple(I.T)] if os.environ.get("ALIGNFROM") != "centroid" else cen[tuple(I.T)]
+        size = np.linalg.norm(nc, axis=1)
+        tilt = np.degrees(np.arccos(np.clip(np.abs(nc).max(axis=1) / np.maximum(size, 1e-300), 0.0, 1.0)))
+        weight = np.where(size > 0, np.clip(1.0 - tilt / G["aligned"], 0.0, 1.0), 0.0)
+    G["weight"] = weight
+    W = sp.kron(sp.csr_matrix(C), sp.diags(Vc[tuple(I.T)] * h**d * weight))
     dK = (1 - G['beta']) * (R.T @ W @ R - R0.T @ W @ R0)
     if G.get("second", False) and "S" in G:
         Dm = [sp.csr_matrix((np.concatenate(Dvals[k]) if Dvals[k] else np.zeros(0), (np.concatenate(Drows[k]) if Drows[k] else np.zeros(0, int), np.concatenate(Dcols[k]) if Dcols[k] else np.zeros(0, int))), shape=(d * n, d * P)) for k in range(d)]
@@ -357,8 +366,24 @@ def subcell_moments(fractions):
     return f
 
 
+def _cell_normals(surface, grid):
+    """[box, d] unit area-weighted mean outward normal of the surface in each cell (0 where none)."""
+    from engine.boundary import surface_quadrature
+    d, h = grid.dim, grid.spacing
+    box = tuple(n + 1 for n in grid.shape)
+    x, w, nrm = surface_quadrature(surface.vertices[surface.faces], h)
+    I = np.clip(np.floor((x - np.asarray(grid.origin)) / h).astype(np.int64), 0, np.asarray(box) - 1)
+    acc = np.zeros(box + (d,))
+    for k in range(d):
+        np.add.at(acc[..., k], tuple(I.T), w * nrm[:, k])
+    norm = np.linalg.norm(acc, axis=-1, keepdims=True)
+    return np.where(norm > 0, acc / np.maximum(norm, 1e-300), 0.0)
+
+
 def _post(self, fractions):
     G["grid"] = fractions.grid
+    if G.get("aligned") and os.environ.get("ALIGNFROM") != "centroid":
+        G["cellnormal"] = _cell_normals(self.surface, fractions.grid)
     if G.get("skiploaded"):
         G["loadedmask"] = _loaded_mask(self, fractions.grid)
     if G.get("subcell") and fractions.subcells is not None:
@@ -429,7 +454,7 @@ def _div(self, load, f):
         if G.get('muonly'):
             K_ = level.lam + 2 * level.mu / d if d == 3 else level.lam + level.mu
             sig = 2 * level.mu * (-float(load.pressure)) / (d * K_)
-        coef[a * n + np.arange(n)] = np.where(near, w * sig, 0.0)
+        coef[a * n + np.arange(n)] = np.where(near, w * sig * G["weight"], 0.0)
     fx = (1 - G["beta"]) * (dR.T @ coef)  # [d P]
     idx = np.indices(box).reshape(d, -1).T
     pos = lay.positions(idx)
@@ -604,6 +629,7 @@ def configure_from_env():
                      ("order2", "ORDER2"), ("skiploaded", "SKIPLOADED"), ("subcell", "SUBCELL")):
         G[key] = e(var) == "1"
     G["along"] = e("ALONG", "1") == "1"
+    G["aligned"] = float(e("ALIGNED", "0")) or None
     if G["subcell"]:
         keep_subcells()
 
