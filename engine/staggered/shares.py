@@ -46,14 +46,15 @@ def patch_shares(surface: Surface, load: SurfaceLoad, grid: Grid, layout: TileLa
     whole, taken = subdivided(pieces[~cut], 0.5 * h), subdivided(pieces[cut], 0.5 * h)
     blocks = _Blocks(grid)
     cells, near_patch = [], []
-    for part in (whole, taken):
-        for start in range(0, len(part), CHUNK):
-            corners = part[start:start + CHUNK].reshape(-1, d)
+    for group in (whole, taken):
+        for start in range(0, len(group), CHUNK):
+            corners = group[start:start + CHUNK].reshape(-1, d)
             cells.append(_cells(grid, corners))
             near_patch.append(blocks.around(corners))
     seeing = _rows_reached(grid, np.unique(np.concatenate(cells)))  # 1 unless the rest is near
     near_patch = np.unique(np.concatenate(near_patch))
-    rest = [subdivided(facets[partly][start:start + CHUNK], h) for start in range(0, int(partly.sum()), CHUNK)]
+    others = facets[partly]
+    rest = [subdivided(others[start:start + CHUNK], h) for start in range(0, len(others), CHUNK)]
     rest = np.concatenate([r[_touching(blocks, r, near_patch)] for r in rest] or [np.zeros((0, d, d))])
     if not len(rest):
         return [(layout_rows, np.ones(len(layout_rows))) for layout_rows in _positions(layout, seeing)]
