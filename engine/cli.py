@@ -42,8 +42,11 @@ def _read_spec(path: str):
         return exc.errors
 
 
-def _output_problem(path: str) -> str | None:
-    """Why a result cannot be written at ``path`` (None if it can), found before any work."""
+def _output_problem(path: str, inputs: list[Path]) -> str | None:
+    """Why a result cannot be written at ``path`` (None if it can), found before any work; ``inputs``
+    (the job and mesh files) are never overwritten."""
+    from .output import replace_problem
+
     p = Path(path)
     if p.suffix in (".xdmf", ".vtkhdf"):
         return f"{path}: the HDF5 result needs another suffix than {p.suffix} (e.g. .h5)"
@@ -52,6 +55,9 @@ def _output_problem(path: str) -> str | None:
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
         return f"cannot write the result to '{path}': the directory '{parent}' does not exist"
+    problem = replace_problem(p, inputs)
+    if problem:
+        return f"cannot write the result to '{path}': {problem}"
     try:  # the way the result is written: a temporary file beside it, renamed
         fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{p.name}.", suffix=".check")
         os.close(fd)
@@ -197,7 +203,7 @@ def cmd_voxelize(args) -> int:
     from .pipeline import Geometry, Limits, geometry_result
     from .runtime import init
 
-    problem = _output_problem(args.output)
+    problem = _output_problem(args.output, [Path(args.mesh)])
     if problem:
         return _error(problem)
     try:
@@ -241,7 +247,9 @@ def cmd_run(args) -> int:
     spec = _read_spec(args.job)
     if isinstance(spec, list):
         return _error(spec)
-    problem = _output_problem(args.output)
+    mesh = spec.geometry.mesh
+    inputs = [Path(args.job)] + ([Path(args.job).resolve().parent / mesh] if mesh else [])
+    problem = _output_problem(args.output, inputs)
     if problem:
         return _error(problem)
     if args.arch:

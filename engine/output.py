@@ -8,9 +8,11 @@ together with XDMF sidecars (``engine.xdmf``) that ParaView, PyVista, meshio and
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import stat
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -430,11 +432,43 @@ def sidecar_paths(path: str | os.PathLike) -> dict[str, Path]:
             "surface": path.with_name(f"{path.stem}.surface.xdmf"), "vtkhdf": path.with_suffix(".vtkhdf")}
 
 
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def replace_problem(path: str | os.PathLike, inputs: Sequence[str | os.PathLike] = ()) -> str | None:
+    """Why a result must not replace what is at ``path`` or its ``sidecar_paths`` (None if it may).
+
+    A result replaces files by renaming over them, which would turn a device (``-o /dev/null``) or
+    a pipe into a regular file and wipe an input given by mistake (``-o part.stl``): refused are an
+    existing target that is not a regular file or a link, one that is one of ``inputs`` (the job's
+    spec and mesh), and an existing ``path`` that is not an HDF5 file (an earlier result is replaced).
+    """
+    path = Path(path)
+    named = [Path(p) for p in inputs]
+    for target in [path, *sidecar_paths(path).values()]:
+        try:
+            mode = os.lstat(target).st_mode
+        except OSError:
+            continue  # nothing there yet
+        if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+            return f"'{target}' exists and is not a regular file"
+        for given in named:
+            same = os.path.abspath(target) == os.path.abspath(given)
+            if same or (stat.S_ISREG(mode) and given.exists() and os.path.samefile(target, given)):
+                return f"'{target}' is the job's own input '{given}': choose another output name"
+    if path.is_file():
+        with open(path, "rb") as fh:
+            if fh.read(len(_HDF5_SIGNATURE)) != _HDF5_SIGNATURE:
+                return f"'{path}' exists and is not an HDF5 file: remove it or choose another output name"
+    return None
+
+
 def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) -> Path:
     """Write ``result`` to the HDF5 file ``path`` and, if ``xdmf``, the files of ``sidecar_paths``
     beside it (the surface one only when the result has a surface).
 
-    Validates first (ValueError naming the dataset). The files appear complete or not at all: they
+    Validates first (ValueError naming the dataset); ``FileExistsError`` when a target must not be
+    replaced (``replace_problem``). The files appear complete or not at all: they
     are written under temporary names in the target directory, fsynced and renamed into place; on
     any error the temporaries are removed and existing files at the targets are left untouched.
     Returns the HDF5 path.
@@ -445,6 +479,9 @@ def write_result(result: Result, path: str | os.PathLike, *, xdmf: bool = True) 
     path = Path(path)
     if path.suffix in (".xdmf", ".vtkhdf"):
         raise ValueError(f"{path}: the HDF5 result needs another suffix than {path.suffix} (e.g. .h5)")
+    problem = replace_problem(path)
+    if problem:
+        raise FileExistsError(errno.EEXIST, problem)
     validate_result(result)
     token = uuid.uuid4().hex[:12]
     tmp_h5 = path.with_name(f".{path.name}.{token}.tmp")

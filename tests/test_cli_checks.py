@@ -6,8 +6,10 @@ outside the solid named in a warning, no note about STL's merged corners."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -15,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from engine.output import read_result
+from engine.output import read_result, write_result
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "cantilever.json"
@@ -77,6 +79,29 @@ def test_an_unwritable_output_is_found_before_any_work(tmp_path, where):
         line = one_error_line(cli(*args))
         assert "cannot write the result to" in line, line
         assert time.perf_counter() - t < 5  # before the mesh is even read, let alone solved
+
+
+def test_a_result_never_replaces_an_input_a_device_or_a_file_that_is_not_a_result(tmp_path):
+    spec = job(tmp_path, grid={"resolution": 8, "padding": 1})
+    os.mkfifo(tmp_path / "pipe.h5")
+    (tmp_path / "notes.h5").write_text("mine")
+    (tmp_path / "side.xdmf").mkdir()  # a side file's name taken by a directory
+    inputs = {p: p.read_bytes() for p in (spec, tmp_path / "cantilever.stl")}
+    cases = {tmp_path / "cantilever.stl": "is the job's own input", spec: "is the job's own input",
+             tmp_path / "pipe.h5": "exists and is not a regular file",
+             tmp_path / "notes.h5": "exists and is not an HDF5 file", tmp_path / "side.h5": "side.xdmf' exists and is not"}
+    for target, reason in cases.items():
+        line = one_error_line(cli("run", spec, "-o", target))
+        assert reason in line, line
+    assert reason in one_error_line(cli("voxelize", STL, "--resolution", "8", "-o", tmp_path / "side.h5"))
+    assert "own input" in one_error_line(cli("voxelize", tmp_path / "cantilever.stl", "--resolution", "8",
+                                             "-o", tmp_path / "cantilever.stl"))
+    assert all(p.read_bytes() == data for p, data in inputs.items()) and (tmp_path / "notes.h5").read_text() == "mine"
+    assert stat.S_ISFIFO((tmp_path / "pipe.h5").lstat().st_mode)
+    assert cli("run", spec, "-o", tmp_path / "r.h5").returncode == 0
+    assert cli("run", spec, "-o", tmp_path / "r.h5").returncode == 0  # an earlier result is replaced
+    with pytest.raises(FileExistsError, match="not an HDF5 file"):  # the Python API's writer too
+        write_result(read_result(tmp_path / "r.h5"), tmp_path / "notes.h5")
 
 
 def test_ctrl_c_is_one_line_exit_130_and_no_temporary_files(tmp_path):
