@@ -105,6 +105,8 @@ def make_grid(
             raise GridError(f"grid.resolution: must be >= 1, got {resolution}")
         if extent.max() <= 0:
             raise GridError("grid.resolution: the geometry has zero extent")
+        if resolution > 2**53:  # beyond any cell limit, and beyond what a float divides
+            raise GridError(f"grid.resolution: {len(str(resolution))} digits, far more cells than any grid limit allows")
         cell_size = float(extent.max()) / resolution
     if not (math.isfinite(cell_size) and cell_size > 0):
         raise GridError(f"grid.cell_size: must be a positive finite number, got {cell_size}")

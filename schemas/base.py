@@ -24,7 +24,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Annotated, Any, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, WrapValidator, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, WrapValidator, model_validator
 from pydantic_core import PydanticCustomError
 
 Loc = tuple[Union[str, int], ...]
@@ -81,9 +81,58 @@ def check_length(vector: tuple) -> tuple:
     return vector
 
 
+# --- scalars of their JSON type ------------------------------------------------------------------
+# pydantic's lax mode turns true into 1.0, "1e7" into 1e7 and 2.0 into 2: a spec that says
+# "youngs_modulus": true would run with E = 1 Pa. Values must have the JSON type the schema states;
+# numpy scalars (Python callers) count as the Python scalars they hold.
+
+
+def _plain(value: Any) -> Any:
+    item = getattr(value, "item", None)
+    return item() if callable(item) and getattr(value, "shape", None) == () else value
+
+
+def _json_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float, str)):
+        return repr(value)
+    return {list: "an array", tuple: "an array", dict: "an object"}.get(type(value), type(value).__name__)
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def of_type(expected: str, accepts: Any) -> BeforeValidator:
+    """Validator: the value (numpy scalars unwrapped) passes ``accepts``, else "expected ``expected``"."""
+    def check(value: Any) -> Any:
+        value = _plain(value)
+        if value is not None and not accepts(value):  # None: for the optional fields' own check
+            raise custom_error(f"{expected.split()[-1]}_type", f"expected {expected}, got {_json_name(value)}")
+        return value
+
+    return BeforeValidator(check)
+
+
+# (an optional field puts the check around its union, ``Annotated[float | None, REAL]``, where the
+# field's own constraints still reach the JSON Schema)
+REAL = of_type("a number", lambda v: isinstance(v, (int, float)) and not isinstance(v, bool))
+INTEGER = of_type("an integer", _is_integer)
+FLAG = of_type("true or false", lambda v: isinstance(v, bool))
+Real = Annotated[float, REAL]
+
+
+def integer_choice(*choices: int) -> BeforeValidator:
+    """Validator of an integer ``Literal``: 2.0 or true is not 2 or 1."""
+    return of_type(" or ".join(map(str, choices)), _is_integer)
+
+Integer = Annotated[int, INTEGER]
+Flag = Annotated[bool, FLAG]
+
 # A vector in R^dimension. The schema states 2..3 items; the exact length needs the document's dimension.
 Vector = Annotated[
-    tuple[float, ...], Field(json_schema_extra={"minItems": 2, "maxItems": 3}), AfterValidator(check_length)
+    tuple[Real, ...], Field(json_schema_extra={"minItems": 2, "maxItems": 3}), AfterValidator(check_length)
 ]
 
 

@@ -24,13 +24,19 @@ from pydantic import (
 )
 
 from .base import (
+    INTEGER,
+    REAL,
     TAGGED,
+    Flag,
+    Integer,
+    Real,
     SpecModel,
     Vector,
     check_length,
     current_dimension,
     custom_error,
     dimension_scope,
+    integer_choice,
     not_null,
     quoted,
     tag_dispatch,
@@ -65,8 +71,8 @@ class GeometrySpec(SpecModel):
         description="2D only: closed loops of [x, y] vertices [m] (last joins first); a point is inside "
         "when an odd number of loops enclose it (outer boundaries and holes, any orientation).",
     )
-    scale: float = Field(1.0, gt=0, description="Factor applied to the coordinates (unit conversion) [-].")
-    transform: tuple[tuple[float, ...], ...] | None = Field(
+    scale: Real = Field(1.0, gt=0, description="Factor applied to the coordinates (unit conversion) [-].")
+    transform: tuple[tuple[Real, ...], ...] | None = Field(
         None,
         description="Rigid transform as a homogeneous matrix (4x4 in 3D, 3x3 in 2D): linear part a proper "
         f"rotation (orthonormal to {ROTATION_TOLERANCE:g}, det +1), bottom row [0, ..., 0, 1]; translation in m.",
@@ -127,11 +133,11 @@ class GridSpec(SpecModel):
 
     model_config = ConfigDict(json_schema_extra={"oneOf": [{"required": ["cell_size"]}, {"required": ["resolution"]}]})
 
-    cell_size: float | None = Field(None, gt=0, json_schema_extra=not_null, description="Cell edge h [m].")
-    resolution: int | None = Field(
+    cell_size: Annotated[float | None, REAL] = Field(None, gt=0, json_schema_extra=not_null, description="Cell edge h [m].")
+    resolution: Annotated[int | None, INTEGER] = Field(
         None, ge=1, json_schema_extra=not_null, description="Cells along the longest side of the bounding box."
     )
-    padding: int = Field(1, ge=0, description="Cells of empty space added on every side.")
+    padding: Integer = Field(1, ge=0, description="Cells of empty space added on every side.")
 
     @model_validator(mode="after")
     def _one_size(self) -> GridSpec:
@@ -161,9 +167,9 @@ class DGMethod(SpecModel):
 
     model_config = TAGGED
     kind: Literal["dg"] = "dg"
-    degree: Literal[1, 2] = Field(1, description="Total polynomial degree per element.")
+    degree: Annotated[Literal[1, 2], integer_choice(1, 2)] = Field(1, description="Total polynomial degree per element.")
     flux: Literal["ip", "bz"] = Field("ip", description="'ip' symmetric interior penalty, 'bz' Babuska-Zlamal.")
-    penalty: float | None = Field(
+    penalty: Annotated[float | None, REAL] = Field(
         None, gt=0, json_schema_extra=not_null,
         description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+); doubled until the matrix is "
                     "positive definite. Default by degree: 2.5 (k=1), 5 (k=2); a larger eta stiffens both "
@@ -188,9 +194,9 @@ Method = Annotated[
 class MaterialSpec(SpecModel):
     """Homogeneous isotropic elastic material."""
 
-    youngs_modulus: float = Field(gt=0, description="Young's modulus E [Pa].")
-    poisson_ratio: float = Field(ge=0, lt=0.5, description="Poisson's ratio nu [-], 0 <= nu < 0.5.")
-    density: float = Field(1000.0, gt=0, description="Mass density rho [kg/m^3].")
+    youngs_modulus: Real = Field(gt=0, description="Young's modulus E [Pa].")
+    poisson_ratio: Real = Field(ge=0, lt=0.5, description="Poisson's ratio nu [-], 0 <= nu < 0.5.")
+    density: Real = Field(1000.0, gt=0, description="Mass density rho [kg/m^3].")
     model: Literal["linear", "corotated"] = Field("linear", description="Small-strain or corotated elasticity.")
 
 
@@ -220,7 +226,7 @@ class DisplacementBoundary(_Boundary):
 
     model_config = TAGGED
     kind: Literal["displacement"] = "displacement"
-    value: Annotated[tuple[float | None, ...], AfterValidator(check_length)] = Field(
+    value: Annotated[tuple[Real | None, ...], AfterValidator(check_length)] = Field(
         description="Displacement [m] per component, null = free (length dimension, at least one number).",
         json_schema_extra={"minItems": 2, "maxItems": 3},
     )
@@ -246,7 +252,7 @@ class PressureBoundary(_Boundary):
 
     model_config = TAGGED
     kind: Literal["pressure"] = "pressure"
-    value: float = Field(description="Pressure [Pa]; positive pushes into the surface.")
+    value: Real = Field(description="Pressure [Pa]; positive pushes into the surface.")
 
 
 Boundary = Annotated[
@@ -273,7 +279,7 @@ class QuasistaticAnalysis(SpecModel):
 
     model_config = TAGGED
     kind: Literal["quasistatic"] = "quasistatic"
-    steps: int = Field(ge=1, description="Number of load steps.")
+    steps: Integer = Field(ge=1, description="Number of load steps.")
 
 
 class DynamicAnalysis(SpecModel):
@@ -281,8 +287,8 @@ class DynamicAnalysis(SpecModel):
 
     model_config = TAGGED
     kind: Literal["dynamic"] = "dynamic"
-    time_step: float = Field(gt=0, description="Time step dt [s].")
-    steps: int = Field(ge=1, description="Number of time steps.")
+    time_step: Real = Field(gt=0, description="Time step dt [s].")
+    steps: Integer = Field(ge=1, description="Number of time steps.")
 
 
 Analysis = Annotated[
@@ -297,8 +303,8 @@ Analysis = Annotated[
 class SolverSpec(SpecModel):
     """Linear solver settings."""
 
-    rtol: float = Field(1e-8, gt=0, lt=1, description="Relative residual tolerance [-].")
-    max_iterations: int = Field(5000, ge=1, description="Iteration cap of the iterative solver.")
+    rtol: Real = Field(1e-8, gt=0, lt=1, description="Relative residual tolerance [-].")
+    max_iterations: Integer = Field(5000, ge=1, description="Iteration cap of the iterative solver.")
     precision: Literal["f64", "f32"] = Field("f64", description="Floating-point precision of the solve.")
     arch: Literal["cpu", "cuda", "auto"] = Field("auto", description="Taichi backend; auto = CUDA if present.")
 
@@ -315,7 +321,7 @@ class OutputSpec(SpecModel):
         json_schema_extra={"uniqueItems": True},
     )
     probes: list[Vector] = Field(default_factory=list, description="Points [m] where fields are sampled.")
-    surface: bool = Field(True, description="Write the deformed surface mesh.")
+    surface: Flag = Field(True, description="Write the deformed surface mesh.")
 
     @field_validator("fields")
     @classmethod
@@ -328,7 +334,7 @@ class OutputSpec(SpecModel):
 
 # --- the job ------------------------------------------------------------------------------------
 
-Dimension = Literal[2, 3]
+Dimension = Annotated[Literal[2, 3], integer_choice(2, 3)]
 _DIMENSION_ADAPTER = TypeAdapter(Dimension)
 
 

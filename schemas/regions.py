@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field, WrapValidator, field_validator
 
-from .base import SpecModel, Vector, custom_error, quoted
+from .base import FLAG, Real, SpecModel, Vector, custom_error, quoted
 
 
 class BoxRegion(SpecModel):
@@ -39,7 +39,7 @@ class Sphere(SpecModel):
     """Ball |x - center| <= radius."""
 
     center: Vector = Field(description="Centre [m].")
-    radius: float = Field(gt=0, description="Radius [m].")
+    radius: Real = Field(gt=0, description="Radius [m].")
 
 
 class SphereRegion(SpecModel):
@@ -74,7 +74,7 @@ class Facing(SpecModel):
     ``direction`` (e.g. a bar's end face out of a half-space that also takes side strips along)."""
 
     direction: Vector = Field(description="Direction the kept facets face (non-zero, need not be unit).")
-    max_angle_deg: float = Field(
+    max_angle_deg: Real = Field(
         gt=0, le=180, description="Largest angle [degrees] between a kept facet's outward normal and direction."
     )
 
@@ -84,7 +84,7 @@ class Facing(SpecModel):
 class AllRegion(SpecModel):
     """Everything: all material (displacement) or the whole surface (traction, pressure)."""
 
-    all: Literal[True]
+    all: Annotated[Literal[True], FLAG]
 
 
 _REGIONS: dict[str, type[SpecModel]] = {

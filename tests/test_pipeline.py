@@ -45,6 +45,9 @@ def test_limits_are_checked_before_any_work(tmp_path):
         prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_memory_bytes=10**6))
     with pytest.raises(GeometryError, match=r"12 facets exceed the limit of 10"):
         prepare_geometry(spec, data, filename="c.stl", cache=GeometryCache(None), limits=Limits(max_triangles=10))
+    # a 401-digit resolution is a grid error, not an OverflowError from the float division
+    with pytest.raises(GridError, match=r"grid.resolution: 401 digits"):
+        prepare_geometry(cantilever_spec(resolution=10**400), data, filename="c.stl", cache=GeometryCache(None))
 
 
 def test_polygon_spec_in_2d():
