@@ -14,6 +14,7 @@ Units: positions [m], tractions, pressures and stresses [Pa], displacements [m],
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -197,14 +198,18 @@ def region_distance(region, points: np.ndarray) -> np.ndarray | None:
     return None
 
 
-def hold_warnings(prescribed: list[Prescribed], surface: Surface) -> list[str]:
-    """A warning for each displacement boundary whose patch covers more than WIDE_HOLD of the
+def check_holds(prescribed: list[Prescribed], surface: Surface) -> list[str]:
+    """Raise BoundaryError when two displacement boundaries prescribe different values of one
+    component on a common part of the surface (a point holds one displacement: a solve would
+    average them silently); return a warning for each whose patch covers more than WIDE_HOLD of the
     surface (usually a half-space whose normal points the wrong way)."""
     facets = surface.vertices[surface.faces]
     total = _measure_and_normal(facets)[0].sum()
+    patches = [bc.region.clip(facets)[0] for bc in prescribed]
+    for i, j in itertools.combinations(range(len(prescribed)), 2):
+        _check_overlap(prescribed[i], patches[i], prescribed[j], surface.dim)
     out = []
-    for bc in prescribed:
-        pieces, _ = bc.region.clip(facets)
+    for bc, pieces in zip(prescribed, patches):
         share = _measure_and_normal(pieces)[0].sum() / total if total > 0 and len(pieces) else 0.0
         if share > WIDE_HOLD:
             out.append(
@@ -212,6 +217,33 @@ def hold_warnings(prescribed: list[Prescribed], surface: Surface) -> list[str]:
                 "the region (a half-space holds the side its normal points away from: the normal points out of it)"
             )
     return out
+
+
+def _check_overlap(a: Prescribed, pieces: np.ndarray, b: Prescribed, d: int) -> None:
+    """BoundaryError when ``a`` (its patch ``pieces`` [M, d, d]) and ``b`` prescribe one component
+    differently on a common part of the surface of positive measure."""
+    both = a.mask(d) & b.mask(d)
+    if not both.any() or not len(pieces):
+        return
+    common, _ = b.region.clip(pieces)
+    measure = _measure_and_normal(common)[0] if len(common) else np.zeros(0)
+    # regions that only touch (a box ending where the next begins) share pieces of no measure
+    if measure.sum() <= 1e-9 * _measure_and_normal(pieces)[0].sum():
+        return
+    points = common[measure > 0].mean(axis=1)
+    ga, gb = a.values(points)[:, both], b.values(points)[:, both]
+    gap = np.abs(ga - gb)
+    if gap.max() <= 1e-9 * max(np.abs(ga).max(), np.abs(gb).max()):
+        return  # e.g. two clamps that overlap
+    q, k = np.unravel_index(np.argmax(gap), gap.shape)
+    axis = "xyz"[np.nonzero(both)[0][k]]
+    unit = "m^2" if d == 3 else "m"
+    raise BoundaryError(
+        f"{a.name} and {b.name}: both prescribe u_{axis} on the same {measure.sum():.4g} {unit} of the surface, with "
+        f"different values there ({ga[q, k]:.6g} and {gb[q, k]:.6g} m); a surface point holds one displacement: narrow "
+        "a region (or give it a `facing`) so that the two patches do not overlap, or leave that component free (null) "
+        "in one of them"
+    )
 
 
 def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

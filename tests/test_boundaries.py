@@ -134,6 +134,23 @@ def test_a_region_without_surface_is_an_error_naming_it_and_the_gap(method):
         simulate(bar_job(method, 0.5, [far]), bar_stl(), filename="bar.stl")
 
 
+@pytest.mark.parametrize("method", [{"kind": "staggered"}, {"kind": "dg", "degree": 1}])
+def test_two_holds_that_disagree_on_a_common_patch_are_an_error_naming_both(method):
+    end = {"kind": "displacement", "name": "pull", "region": {"box": [[L - 0.1, -2, -2], [L + 1, 2, 2]]},
+           "value": [1e-3, None, None]}
+    everywhere = {"kind": "displacement", "name": "glue", "region": {"all": True}, "value": [0, 0, 0]}
+    with pytest.raises(BoundaryError, match=r"glue and pull: both prescribe u_x on the same 1.4 m\^2 of the surface, "
+                                            r"with different values there \(0 and 0.001 m\)"):
+        simulate(bar_job(method, 0.5, [everywhere, end]), bar_stl(), filename="bar.stl")
+    # what may overlap: equal values (two clamps), other components (a roller), regions that only touch
+    roller = {"kind": "displacement", "name": "roller", "region": {"box": [[-1, -2, -2], [0.5, 2, 2]]},
+              "value": [None, 0, None]}
+    touching = {**end, "name": "lift", "region": {"box": [[0.1, -2, -2], [0.3, 2, 2]]}, "value": [None, None, 2e-3]}
+    r = simulate(bar_job(method, 0.5, [CLAMP, {**CLAMP, "name": "clamp 2"}, roller, touching], gravity=(0, 0, 0)),
+                 bar_stl(), filename="bar.stl")
+    assert np.isfinite(r.fields.probes["displacement"]).all()
+
+
 def test_a_hold_over_most_of_the_surface_is_a_warning_that_names_the_half_space_rule():
     # the user meant x <= 0.1 but gave the normal that holds x >= 0.1: nearly the whole bar
     wrong = {**CLAMP, "region": {"halfspace": {"point": [0.1, 0, 0], "normal": [-1, 0, 0]}}}

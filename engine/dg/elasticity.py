@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..boundary import Prescribed, hold_warnings
+from ..boundary import Prescribed, check_holds
 from ..errors import VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
@@ -116,7 +116,7 @@ class DGElasticity(BoundaryTerms, Fields):
         say("boundaries and loads", 0.4)
         t = time.perf_counter()
         self.patches = self._dirichlet_patches()
-        self.warnings += hold_warnings(self.prescribed, self.surface)
+        self.warnings += check_holds(self.prescribed, self.surface)
         self.load_vector = self._loads()
         self.timings["loads"] = time.perf_counter() - t
         self.modes = self._free_modes()

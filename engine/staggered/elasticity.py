@@ -20,7 +20,7 @@ from dataclasses import InitVar, dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import Prescribed, SurfaceLoad, hold_warnings, patch_quadrature, tractions
+from ..boundary import Prescribed, SurfaceLoad, check_holds, patch_quadrature, tractions
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
@@ -109,7 +109,7 @@ class StaggeredElasticity(StaggeredFields):
         say("boundaries", 0.3)
         self.surface_terms = make_surface_operator(level, self.hold) if self.hold is not None else None
         level.set_surface(self.surface_terms, self.patches)
-        self.warnings += hold_warnings(self.prescribed, self.surface)
+        self.warnings += check_holds(self.prescribed, self.surface)
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
