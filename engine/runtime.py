@@ -20,7 +20,9 @@ import hashlib
 import io
 import linecache
 import os
+import signal
 import sys
+import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -190,19 +192,40 @@ def _source_keyed_fast_cache() -> None:
     warnings.filterwarnings("ignore", message=r"\[PURE\.VIOLATION\]", category=UserWarning)
 
 
+# How long a forked cache writer may take before it is stopped (the bundled cantilever: ~25 ms).
+SAVE_TIMEOUT = 60.0
+
+
 def save_kernel_cache() -> None:
     """Write the kernels compiled so far to the offline cache now, not only at a normal exit.
 
     A service worker stopped by a limit or a cancellation would otherwise lose what its jobs
-    compiled, and its replacement would compile it again inside the next job. Costs ~25 ms after a
-    process's first job, nothing measurable after (the bundled cantilever). No-op before :func:`init`.
+    compiled, and its replacement would compile it again inside the next job. The writing happens
+    in a forked copy of the process: gstaichi's ``dump_cache_data_to_disk`` frees the machine code
+    of the kernels it writes while the process still launches them, so the next job after one that
+    compiled new kernels died of SIGSEGV in the same process. The fork costs ~20-25 ms (the bundled
+    cantilever). No-op before :func:`init` and where there is no fork (the kernels are then written
+    at a normal exit only).
     """
-    if _current is None:
+    if _current is None or not hasattr(os, "fork"):
         return
-    try:
-        ti.lang.impl.get_runtime().prog.dump_cache_data_to_disk()
-    except Exception:  # a full disk, a read-only cache: the kernels compile again next time, no more
-        pass
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:  # the copy: write and leave at once (no atexit, no finalizers, no shared pipes touched)
+        code = 0
+        try:
+            ti.lang.impl.get_runtime().prog.dump_cache_data_to_disk()
+        except BaseException:  # a full disk, a read-only cache: the kernels compile again next time, no more
+            code = 1
+        os._exit(code)
+    deadline = time.monotonic() + SAVE_TIMEOUT
+    while os.waitpid(pid, os.WNOHANG) == (0, 0):
+        if time.monotonic() > deadline:  # a lock some other thread held at the fork: give up on this save
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            return
+        time.sleep(0.002)
 
 
 def cuda_driver_present() -> bool:

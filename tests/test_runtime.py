@@ -150,6 +150,8 @@ def test_a_second_process_loads_kernels_by_their_source_and_a_killed_one_keeps_w
         ck.double(x)
         print("loaded", ck.double._primal.src_ll_cache_observations.cache_loaded, x.tolist(), flush=True)
         runtime.save_kernel_cache()
+        ck.double(x)  # a kernel written to the cache still runs (an in-process dump freed its code: SIGSEGV)
+        assert x.tolist() == [3.0, 7.0, 11.0], x
         os.kill(os.getpid(), 9)
         """
     first, second = run_py(script), run_py(script)
