@@ -28,3 +28,8 @@ class BoundaryError(VoxelasticError):
 class ThinFeatureError(VoxelasticError):
     """Material thinner than a grid cell leaves displacement samples that nothing holds (a
     singular stiffness matrix); the message counts them, says where, and what to change."""
+
+
+class BackendError(VoxelasticError, RuntimeError):
+    """The compute backend a job asks for (``solver.arch``, ``solver.precision``) cannot run here:
+    no CUDA on this machine, or a process already running its kernels on another one."""

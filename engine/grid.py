@@ -119,15 +119,23 @@ def make_grid(
     counts = [max(math.ceil(float(r) - 1e-9), 1) + 2 * int(padding) for r in ratios]
     total = math.prod(counts)
     if (max_cells is not None and total > max_cells) or max(counts) > 2**40:
-        shape = "x".join(str(n) if n < 10**12 else f"{n:.3g}" for n in counts)
+        shape = "x".join(str(n) if n < 10**12 else _rough(n) for n in counts)
         raise GridError(
-            f"grid: {shape} = {total if total < 10**15 else f'{total:.3g}'} cells exceeds the limit of "
+            f"grid: {shape} = {total if total < 10**15 else _rough(total)} cells exceeds the limit of "
             f"{max_cells if max_cells is not None else 2**40}; increase grid.cell_size or lower grid.resolution"
         )
     cells = np.array(counts, dtype=np.int64)
     centre = 0.5 * (lower + upper)
     origin = centre - 0.5 * cell_size * cells
     return Grid(origin=tuple(float(o) for o in origin), spacing=float(cell_size), shape=tuple(int(n) for n in cells))
+
+
+def _rough(n: int) -> str:
+    """A huge count in three digits, also beyond what a float holds (1e-300 m cells)."""
+    try:
+        return f"{n:.3g}"
+    except OverflowError:
+        return f"{str(n)[0]}e+{len(str(n)) - 1}"
 
 
 def axis_pairs(d: int) -> tuple[tuple[int, int], ...]:

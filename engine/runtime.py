@@ -31,6 +31,7 @@ from typing import Literal
 import numpy as np
 import gstaichi as ti  # engine/__init__.py has set its environment: no banner on stdout
 
+from .errors import BackendError
 from .geometry.cache import cache_root
 
 Arch = Literal["cpu", "cuda", "auto"]
@@ -68,11 +69,14 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
         raise ValueError(f"precision: expected 'f64' or 'f32', got {precision!r}")
     if _current is not None:
         if _current.precision != precision or (arch != "auto" and _current.arch != arch):
-            raise RuntimeError(
-                f"Taichi already initialised with arch={_current.arch}, precision={_current.precision}; "
-                f"cannot switch to arch={arch}, precision={precision} in the same process"
+            raise BackendError(
+                f"solver.arch / solver.precision: Taichi already initialised with arch={_current.arch}, precision="
+                f"{_current.precision}; cannot switch to arch={arch}, precision={precision} in the same process"
             )
         return _current
+    if arch == "cuda" and not cuda_driver_present():  # Taichi would fall back to the CPU with a warning alone
+        raise BackendError("solver.arch: 'cuda' was asked for, but this machine has no CUDA driver; use 'auto' "
+                           "(CUDA where present, else the CPU) or 'cpu'")
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     # Kernels compute in f64 whatever the precision: geometry must stay exact, and "f32" only
@@ -92,6 +96,9 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
             log_level=ti.WARN if precision == "f64" else ti.ERROR,
         )
     chosen = ti.lang.impl.current_cfg().arch
+    if arch == "cuda" and chosen != ti.cuda:  # a driver but no usable device
+        raise BackendError("solver.arch: 'cuda' was asked for, but Taichi found no usable CUDA device here; use "
+                           "'auto' or 'cpu'")
     _current = RuntimeInfo(arch="cuda" if chosen == ti.cuda else "cpu", precision=precision, cache_dir=str(cache))
     return _current
 

@@ -191,12 +191,34 @@ Method = Annotated[
 # --- material and loads ------------------------------------------------------------------------
 
 
+# Material scales and time steps outside this range overflow or underflow in the solvers' f64
+# arithmetic (E = 1e308 broke the eigen-solve of the rigid modes, 1e-308 let the hold's penalty
+# vanish, dt = 1e-300 squared to zero): the range is far wider than any material or step.
+SCALE_RANGE = (1e-100, 1e100)
+
+
+def _in_scale(unit: str) -> AfterValidator:
+    def check(value: float) -> float:
+        lo, hi = SCALE_RANGE
+        if not lo <= value <= hi:
+            raise custom_error("scale_range", f"{value:g} {unit} is outside {lo:g} .. {hi:g} {unit}, the range the "
+                               "solvers' arithmetic is checked over")
+        return value
+
+    return AfterValidator(check)
+
+
+SCALE_SCHEMA = {"minimum": SCALE_RANGE[0], "maximum": SCALE_RANGE[1]}
+
+
 class MaterialSpec(SpecModel):
     """Homogeneous isotropic elastic material."""
 
-    youngs_modulus: Real = Field(gt=0, description="Young's modulus E [Pa].")
+    youngs_modulus: Annotated[Real, _in_scale("Pa")] = Field(gt=0, json_schema_extra=SCALE_SCHEMA,
+                                                          description="Young's modulus E [Pa].")
     poisson_ratio: Real = Field(ge=0, lt=0.5, description="Poisson's ratio nu [-], 0 <= nu < 0.5.")
-    density: Real = Field(1000.0, gt=0, description="Mass density rho [kg/m^3].")
+    density: Annotated[Real, _in_scale("kg/m^3")] = Field(1000.0, gt=0, json_schema_extra=SCALE_SCHEMA,
+                                                          description="Mass density rho [kg/m^3].")
     model: Literal["linear", "corotated"] = Field("linear", description="Small-strain or corotated elasticity.")
 
 
@@ -287,7 +309,7 @@ class DynamicAnalysis(SpecModel):
 
     model_config = TAGGED
     kind: Literal["dynamic"] = "dynamic"
-    time_step: Real = Field(gt=0, description="Time step dt [s].")
+    time_step: Annotated[Real, _in_scale("s")] = Field(gt=0, json_schema_extra=SCALE_SCHEMA, description="Time step dt [s].")
     steps: Integer = Field(ge=1, description="Number of time steps.")
 
 

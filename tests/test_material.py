@@ -39,3 +39,30 @@ def test_plane_strain_von_mises_uses_sigma_zz():
     assert von_mises(sig2, 2, lam, mu) == pytest.approx(von_mises(sig3, 3), rel=1e-14)
     with pytest.raises(ValueError, match="plane strain needs lam and mu"):
         von_mises(sig2, 2)
+
+
+@pytest.mark.parametrize("method", [{"kind": "staggered"}, {"kind": "dg", "degree": 1}])
+def test_the_ends_of_the_accepted_modulus_range_solve_the_same_scaled_problem(method):
+    """schemas.job.SCALE_RANGE: at E = 1e-100 and 1e100 Pa the displacement is the E = 1e7 one times
+    1e7 / E (linear elasticity), to round-off; beyond the range the spec is refused."""
+    import json
+    from pathlib import Path
+
+    from engine import simulate
+    from schemas import SpecError, parse_job
+
+    root = Path(__file__).resolve().parents[1] / "examples"
+    spec = json.loads((root / "cantilever.json").read_text())
+    spec.update(grid={"resolution": 12, "padding": 1}, method=method)
+    mesh = (root / "cantilever.stl").read_bytes()
+
+    def probe(E: float) -> np.ndarray:
+        spec["material"]["youngs_modulus"] = E
+        return simulate(spec, mesh, filename="cantilever.stl").fields.probes["displacement"]
+
+    reference = probe(1e7)
+    for E in (1e-100, 1e100):
+        np.testing.assert_allclose(probe(E) * (E / 1e7), reference, rtol=1e-6, atol=1e-9 * np.abs(reference).max())
+    spec["material"]["youngs_modulus"] = 1e101
+    with pytest.raises(SpecError, match=r"material.youngs_modulus: 1e\+101 Pa is outside 1e-100 .. 1e\+100 Pa"):
+        parse_job(spec)

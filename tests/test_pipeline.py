@@ -8,6 +8,7 @@ import pytest
 
 from engine.errors import GeometryError, GridError, MethodUnavailableError
 from engine.geometry.cache import GeometryCache
+from engine.grid import make_grid
 from engine.pipeline import Limits, prepare_geometry, run
 from schemas import parse_job
 
@@ -48,6 +49,8 @@ def test_limits_are_checked_before_any_work(tmp_path):
     # a 401-digit resolution is a grid error, not an OverflowError from the float division
     with pytest.raises(GridError, match=r"grid.resolution: 401 digits"):
         prepare_geometry(cantilever_spec(resolution=10**400), data, filename="c.stl", cache=GeometryCache(None))
+    with pytest.raises(GridError, match=r"= 9e\+899 cells exceeds the limit"):  # the count is beyond a float
+        make_grid((0, 0, 0), (1, 1, 1), cell_size=1e-300)
 
 
 def test_polygon_spec_in_2d():

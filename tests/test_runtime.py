@@ -4,6 +4,10 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
+from engine.runtime import cuda_driver_present as runtime_cuda_present
+
 
 def run_py(code: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120)
@@ -43,6 +47,27 @@ def test_init_once_with_precision_and_refuses_a_switch():
     assert lines[0].split()[0] in ("cpu", "cuda")
     assert lines[1] == "refused: True"
     assert "Taichi]" not in out.stdout  # stdout stays clean for the CLI (no "[GsTaichi] version" banner)
+
+
+def test_cuda_asked_for_where_there_is_none_is_an_error_naming_the_field():
+    """Taichi falls back to the CPU with a log line alone; a job that asks for CUDA must hear it has none."""
+    if runtime_cuda_present():
+        pytest.skip("this machine has a CUDA driver")
+    out = run_py(
+        """
+        from engine import runtime
+        from engine.errors import VoxelasticError
+        try:
+            runtime.init("cuda", "f64")
+        except VoxelasticError as exc:
+            print(exc)
+        print(runtime.current())
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert lines[0].startswith("solver.arch: 'cuda' was asked for, but this machine has no CUDA driver"), out.stdout
+    assert lines[1] == "None"
 
 
 def test_a_kernel_compile_error_still_names_its_file_line_and_statement(tmp_path):
