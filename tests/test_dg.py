@@ -348,3 +348,27 @@ def test_quadratic_ip_does_not_lock_and_stays_symmetric(nu):
         assert np.abs(u[:4, 2] - u[0, 2]).max() < 1e-6 * scale  # vertical: the same at the mirror images
         assert abs(u[0, 0] + u[1, 0]) < 1e-6 * scale and abs(u[0, 1] + u[2, 1]) < 1e-6 * scale
         assert abs(u[0, 0] - u[3, 1]) < 1e-6 * scale and abs(u[0, 1] - u[3, 0]) < 1e-6 * scale
+
+
+@pytest.mark.parametrize("method", [{"kind": "dg", "degree": 1}, {"kind": "staggered"}])
+def test_a_part_far_from_the_origin_solves_as_it_does_at_the_origin(method):
+    """Survey coordinates: the same bar 1e6 m from the origin (a float64 OBJ) stretched by 1 mm; the
+    slicer used to cut it in world coordinates, lost its interfaces and left every element loose
+    (u_x 0 at mid-length instead of 0.5 mm, with 72 'rigid modes' reported)."""
+    from engine import simulate
+
+    def stretched(offset: float) -> np.ndarray:
+        o = np.full(3, offset)
+        mesh = trimesh.creation.box(bounds=[o + [0, -0.1, -0.1], o + [1, 0.1, 0.1]]).export(file_type="obj")
+        hold = {"kind": "displacement", "value": [0, None, None], "facing": {"direction": [-1, 0, 0], "max_angle_deg": 30},
+                "region": {"box": [(o + [-0.1, -1, -1]).tolist(), (o + [0.01, 1, 1]).tolist()]}}
+        pull = {**hold, "value": [1e-3, None, None], "facing": {"direction": [1, 0, 0], "max_angle_deg": 30},
+                "region": {"box": [(o + [0.99, -1, -1]).tolist(), (o + [1.1, 1, 1]).tolist()]}}
+        spec = {"geometry": {"mesh": "bar.obj"}, "grid": {"resolution": 8}, "method": method,
+                "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3}, "boundaries": [hold, pull],
+                "output": {"fields": ["displacement"], "probes": [(o + [0.5, 0.05, 0.05]).tolist()], "surface": False}}
+        return simulate(spec, mesh.encode(), filename="bar.obj").fields.probes["displacement"][0]
+
+    near, far = stretched(0.0), stretched(1e6)
+    np.testing.assert_allclose(near, [5e-4, -1.5e-5, -1.5e-5], rtol=2e-3)  # u_x = x / 1000, u_y = -nu y / 1000
+    np.testing.assert_allclose(far, near, rtol=1e-6, atol=1e-10)

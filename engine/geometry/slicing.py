@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import manifold3d
 import numpy as np
@@ -118,6 +118,13 @@ def slice_cells(surface: Surface, grid: Grid, degree: int = 4, *, min_fraction: 
     if grid.dim != 3:
         raise GeometryError(f"slice_cells: hex slicing needs a 3D grid, got a {grid.dim}D grid")
     _check_surface(surface)
+    # Cut in the grid's own frame (origin at 0): manifold3d's tolerances and the grid-plane tests
+    # scale with the coordinates' magnitude, and a part placed 1e6 m from the origin (survey
+    # coordinates) lost its interfaces (elements left unconnected, a silently wrong solution).
+    shift = np.asarray(grid.origin, dtype=float)
+    world = grid
+    grid = replace(grid, origin=(0.0,) * 3)
+    surface = replace(surface, vertices=np.asarray(surface.vertices, dtype=float) - shift)
     clock = time.perf_counter()
     # Workers boot while the solid is built and cut in two.
     procs = start_workers(_auto_workers(surface, grid) if workers is None else workers)
@@ -138,7 +145,8 @@ def slice_cells(surface: Surface, grid: Grid, degree: int = 4, *, min_fraction: 
     stamp = time.perf_counter()
     cut = _assemble(digests, grid, int(degree), warnings, stats)
     stats["moments_and_faces"] = time.perf_counter() - stamp
-    return cut
+    # moments are about cell centres in units of h: only the surface pieces move back
+    return replace(cut, grid=world, boundary_triangles=cut.boundary_triangles + shift)
 
 
 def _check_surface(surface: Surface) -> None:
