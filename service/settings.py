@@ -65,6 +65,10 @@ class Settings(BaseSettings):
 
     # --- limits ---------------------------------------------------------------------------------
     max_upload_bytes: int = Field(64 * 2**20, ge=1, description="Largest request body of POST /jobs (413 above).")
+    max_spec_bytes: int = Field(
+        4 * 2**20, ge=1024, description="Largest job spec, as a text field or a file part (413 above). Every status "
+        "poll returns the spec; the largest real specs (thousands of probes) are some hundred kB."
+    )
     max_triangles: int = Field(5_000_000, ge=1, description="Largest mesh (facets) accepted.")
     max_cells: int = Field(2**28, ge=1, description="Largest background grid (cells) accepted.")
     max_job_memory_bytes: int | None = Field(

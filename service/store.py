@@ -22,7 +22,7 @@ from typing import Any
 from sqlalchemy import case, delete, func, select, text, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
 from .db import CounterRow, JobRow, make_engine
 
@@ -59,7 +59,7 @@ class Job:
     id: str
     status: str
     created_at: datetime
-    spec: str
+    spec: str | None  # canonical JSON; None when read without it (``with_spec=False``)
     mesh_suffix: str
     mesh_bytes: int
     precision: str
@@ -97,8 +97,9 @@ class Job:
 _FIELDS = [f.name for f in fields(Job)]
 
 
-def _snapshot(row: JobRow) -> Job:
-    values = {name: getattr(row, name) for name in _FIELDS}
+def _snapshot(row: JobRow, with_spec: bool = True) -> Job:
+    values = {name: getattr(row, name) for name in _FIELDS if with_spec or name != "spec"}
+    values.setdefault("spec", None)
     for name in ("created_at", "started_at", "finished_at", "heartbeat_at"):
         values[name] = _aware(values[name])
     values["warnings"] = list(values["warnings"] or [])
@@ -194,14 +195,26 @@ class JobStore:
         with self.engine.connect() as conn:
             conn.execute(text("SELECT 1"))
 
-    def get(self, job_id: str) -> Job | None:
+    def get(self, job_id: str, *, with_spec: bool = True) -> Job | None:
+        """The job's row; ``with_spec=False`` leaves the spec column unread (``Job.spec`` None): it
+        never changes and can be megabytes, while status polls and event streams run every 0.2 s."""
         with Session(self.engine) as s:
-            row = s.get(JobRow, job_id)
-            return _snapshot(row) if row is not None else None
+            if with_spec:
+                row = s.get(JobRow, job_id)
+            else:
+                row = s.scalars(select(JobRow).options(defer(JobRow.spec, raiseload=True))
+                                .where(JobRow.id == job_id)).first()
+            return _snapshot(row, with_spec) if row is not None else None
 
-    def get_owned(self, job_id: str, owner: str | None, everyone: bool = False) -> Job | None:
+    def spec_of(self, job_id: str) -> str | None:
+        """The stored spec alone (canonical JSON), None if the job is gone."""
+        with Session(self.engine) as s:
+            return s.scalar(select(JobRow.spec).where(JobRow.id == job_id))
+
+    def get_owned(self, job_id: str, owner: str | None, everyone: bool = False, *,
+                  with_spec: bool = True) -> Job | None:
         """The job if ``owner`` submitted it (any job when ``everyone``); else None, as if absent."""
-        job = self.get(job_id)
+        job = self.get(job_id, with_spec=with_spec)
         if job is None or everyone or job.owner == owner:
             return job
         return None

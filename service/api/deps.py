@@ -85,3 +85,14 @@ def get_job(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
 
 
 JobDep = Annotated[Job, Depends(get_job)]
+
+
+def get_job_brief(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
+    """:func:`get_job` without the spec (``Job.spec`` None): for routes that never show it."""
+    job = store.get_owned(job_id, principal.owner, principal.everyone, with_spec=False)
+    if job is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job_id}")
+    return job
+
+
+JobBriefDep = Annotated[Job, Depends(get_job_brief)]

@@ -22,16 +22,16 @@ from collections.abc import AsyncIterator
 
 from starlette.concurrency import run_in_threadpool
 
-from .models import job_out
+from .models import job_out, output_surface
 from ..store import JobStore
 
 POLL = 0.2  # seconds between looks at the row
 KEEPALIVE = 15.0  # a comment line this often keeps proxies from closing an idle stream
 
 
-def _snapshot(job) -> str:
+def _snapshot(job, surface: bool | None = None) -> str:
     # the job as GET /jobs/{id} shows it, less the spec: that never changes and is the bulk of it
-    return job_out(job).model_dump_json(exclude={"spec"})
+    return job_out(job, surface=surface).model_dump_json(exclude={"spec"})
 
 
 def last_seen(header: str | None) -> int | None:
@@ -54,12 +54,17 @@ async def job_events(store: JobStore, job_id: str, last_seen: int | None = None)
     last, quiet_since = last_seen, time.monotonic()
     yield "retry: 1000\n\n"
     while True:
-        job = await run_in_threadpool(store.get, job_id)
+        # without the spec: it never changes, and reading a large one 5 times a second per stream
+        # took the API's CPU (issue: 5 streams of a 28 MB spec, 89 %)
+        job = await run_in_threadpool(lambda: store.get(job_id, with_spec=False))
         if job is None:
             yield format_event("deleted", json.dumps({"id": job_id}))
             return
         if job.terminal:
-            yield format_event("end", _snapshot(job), job.revision)
+            surface = None
+            if job.status == "succeeded":  # its result links depend on output.surface: read once
+                surface = output_surface(await run_in_threadpool(store.spec_of, job_id))
+            yield format_event("end", _snapshot(job, surface), job.revision)
             return
         if job.revision != last:
             last, quiet_since = job.revision, time.monotonic()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from datetime import datetime
 from typing import Any, Literal
 
@@ -62,6 +63,15 @@ class JobOut(BaseModel):
         "Mises [Pa] on the surface and in the volume, each {value, location [m], time}."))
 
 
+def job_json(job: Job) -> str:
+    """``job_out(job)`` as JSON with the stored spec copied in as it is: it is canonical JSON made
+    by the server, and parsing and re-encoding it on every status poll cost the most CPU of all
+    (a spec of megabytes)."""
+    surface = output_surface(job.spec) if job.status == "succeeded" else None
+    head = job_out(replace(job, spec=None), surface=surface).model_dump_json(exclude={"spec"})
+    return f'{head[:-1]},"spec":{job.spec}}}'
+
+
 class JobPage(BaseModel):
     items: list[JobOut]
     total: int
@@ -77,8 +87,14 @@ class Health(BaseModel):
     version: str
 
 
-def job_out(job: Job) -> JobOut:
-    """The API view of a stored job."""
+def output_surface(spec_json: str | None) -> bool:
+    """Whether a stored spec asks for the surface output (its default: yes)."""
+    return bool(json.loads(spec_json or "{}").get("output", {}).get("surface", True))
+
+
+def job_out(job: Job, *, surface: bool | None = None) -> JobOut:
+    """The API view of a stored job. A job read without its spec (``job.spec`` None) gets ``spec =
+    {}`` (callers exclude it) and, once succeeded, needs ``surface`` for its result links."""
     now = utcnow()
     queued = None
     if job.started_at is not None:
@@ -91,7 +107,8 @@ def job_out(job: Job) -> JobOut:
     result = None
     if job.status == "succeeded":
         base = f"/jobs/{job.id}"
-        surface = bool(json.loads(job.spec).get("output", {}).get("surface", True))
+        if surface is None:
+            surface = output_surface(job.spec)
         files = {"vtkhdf": f"{base}/result.vtkhdf", "solid_xdmf": f"{base}/result.solid.xdmf"}
         if surface:
             files["surface_xdmf"] = f"{base}/result.surface.xdmf"
@@ -113,6 +130,6 @@ def job_out(job: Job) -> JobOut:
         error=job.error,
         error_kind=job.error_kind,
         result=result,
-        spec=json.loads(job.spec),
+        spec=json.loads(job.spec) if job.spec is not None else {},
         summary=summary,
     )

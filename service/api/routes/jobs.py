@@ -16,9 +16,9 @@ from fastapi.responses import FileResponse, StreamingResponse
 from ...admission import Rejected
 from ...jobs import QueueFull, QueueUnavailable, cancel_or_delete, submit
 from ...store import IdempotencyConflict, JobStatus
-from ..deps import JobDep, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
+from ..deps import JobBriefDep, JobDep, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
 from ..events import job_events, last_seen
-from ..models import JobOut, JobPage, job_out
+from ..models import JobOut, JobPage, job_json, job_out
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -61,8 +61,8 @@ def create_job(
         str | None, Header(min_length=1, max_length=255, description="Repeat-safe submission: same key, same job.")
     ] = None,
 ) -> JobOut:
+    spec_text = _spec_text(spec, settings.max_spec_bytes)
     data = mesh.file.read() if mesh is not None else None
-    spec_text = spec if isinstance(spec, str) else spec.file.read()  # a text field, or a file part
     try:
         done = submit(store, storage, queue, settings, spec_text=spec_text, mesh=data,
                       mesh_filename=mesh.filename if mesh is not None else None, idempotency_key=idempotency_key,
@@ -80,6 +80,20 @@ def create_job(
     if not done.created:
         response.headers["Idempotent-Replayed"] = "true"
     return job_out(done.job)
+
+
+def _spec_text(spec: UploadFile | str, limit: int) -> str | bytes:
+    """The spec's text, or 413 naming ``spec`` when it is over ``limit`` bytes. Read no further than
+    that: every status poll returns the stored spec, so its size is what each poll costs."""
+    text = spec if isinstance(spec, str) else spec.file.read(limit + 1)
+    size = len(text.encode("utf-8", "surrogatepass")) if isinstance(text, str) else len(text)
+    if size > limit:
+        raise HTTPException(status.HTTP_413_REQUEST_ENTITY_TOO_LARGE, detail=[{
+            "loc": ["body", "spec"], "type": "too_large",
+            "msg": f"the spec is over {limit} bytes ({limit / 2**20:g} MiB), this server's limit for a job spec "
+                   "(VOXELASTIC_MAX_SPEC_BYTES); a spec this large is mostly probes or polygon points: "
+                   "use fewer, or a mesh file for the geometry"}])
+    return text
 
 
 @router.get("", response_model=JobPage, responses={401: _ERRORS[401]}, summary="List jobs, newest first")
@@ -100,8 +114,8 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=_ERRORS, summary="Status, progress, timings, result links")
-def get_job(job: JobDep) -> JobOut:
-    return job_out(job)
+def get_job(job: JobDep) -> Response:
+    return Response(job_json(job), media_type="application/json")
 
 
 @router.get(
@@ -110,7 +124,7 @@ def get_job(job: JobDep) -> JobOut:
     summary="Server-sent events of a job until it ends",
 )
 def job_event_stream(
-    job: JobDep,
+    job: JobBriefDep,
     store: StoreDep,
     last_event_id: Annotated[
         str | None, Header(max_length=64, description="The id of the last event seen (a reconnecting client); "
@@ -143,7 +157,7 @@ def _finished_file(job, path, media_type: str) -> FileResponse:
                416: {"description": "Range not satisfiable."}},
     summary="Download the HDF5 result (Range requests supported)",
 )
-def get_result(job: JobDep, storage: StorageDep) -> FileResponse:
+def get_result(job: JobBriefDep, storage: StorageDep) -> FileResponse:
     return _finished_file(job, storage.result_path(job.id), HDF5_TYPE)
 
 
@@ -154,7 +168,7 @@ def get_result(job: JobDep, storage: StorageDep) -> FileResponse:
                409: {"description": "Not (successfully) finished."}},
     summary="Download the XDMF sidecar of the result",
 )
-def get_result_xdmf(job: JobDep, storage: StorageDep) -> FileResponse:
+def get_result_xdmf(job: JobBriefDep, storage: StorageDep) -> FileResponse:
     return _finished_file(job, storage.xdmf_path(job.id), XDMF_TYPE)
 
 
@@ -231,7 +245,7 @@ def _render(result: Path, picture: Path) -> None:
     },
     summary="Cancel a queued/running job, or delete a finished one",
 )
-def delete_job(job: JobDep, store: StoreDep, storage: StorageDep) -> Response:
+def delete_job(job: JobBriefDep, store: StoreDep, storage: StorageDep) -> Response:
     outcome = cancel_or_delete(store, storage, job)
     if outcome.outcome == "deleted":
         return Response(status_code=status.HTTP_204_NO_CONTENT)

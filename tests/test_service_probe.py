@@ -1,0 +1,87 @@
+"""Findings of a probe of the running service, each held by a test on a real server on loopback:
+status polls and event streams that do not read the spec, memory of rejected uploads freed at
+once, sizes and error lists bounded, fields named, HEAD, ranges, links and metrics per tenant."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+
+import httpx
+import psutil
+import pytest
+from service_helpers import MESH, Server, cantilever, long_job, shared_cache_dir
+
+ALICE, BOB, ADMIN = "alice-token-0123456789", "bob-token-9876543210", "admin-token-5555555555"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    srv = Server(tmp_path_factory.mktemp("probe") / "data", shared_cache_dir(tmp_path_factory), workers=1,
+                 tokens=f"{ALICE},{BOB}", admin_tokens=ADMIN)
+    srv.client.headers["Authorization"] = f"Bearer {ALICE}"
+    srv.start()
+    yield srv
+    srv.close()
+
+
+def client(server: Server, token: str) -> httpx.Client:
+    return httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {token}"}, timeout=60)
+
+
+def rss_mb(pid: int) -> float:
+    return psutil.Process(pid).memory_info().rss / 2**20
+
+
+# --- item 1: the spec is bounded, and polls do not read it ----------------------------------------
+
+
+def test_a_spec_over_the_cap_is_413_naming_spec(server):
+    spec = cantilever(16)
+    spec["output"] = {"probes": [[0.5, 0.01, 0.01]] * 300_000}  # 5.4 MB of JSON, over the 4 MiB cap
+    body = json.dumps(spec).encode()
+    assert len(body) > 4 * 2**20
+    r = server.client.post("/jobs", files={"spec": ("job.json", body), "mesh": ("c.stl", MESH)})
+    assert r.status_code == 413, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "spec"] and "4194304 bytes (4 MiB)" in err["msg"] and "VOXELASTIC_MAX_SPEC_BYTES" in err["msg"]
+
+
+def test_status_polls_and_event_streams_do_not_read_the_spec(server):
+    job_id = server.submit_ok(long_job(400))
+    server.wait_running(job_id, stage=None)
+    shown = server.job(job_id)["spec"]
+    assert shown["grid"]["resolution"] == 64
+    # a stored spec of 30 MB (an older server had no cap): status polls of streams must not read it
+    huge = json.dumps({**shown, "output": {**shown["output"], "probes": [[0.5, 0.01, 0.01]] * 1_500_000}})
+    with sqlite3.connect(server.data_dir / "jobs.db", timeout=30) as db:
+        db.execute("UPDATE voxelastic_jobs SET spec = ? WHERE id = ?", (huge, job_id))
+    api = psutil.Process(server.proc.pid)
+    stop = threading.Event()
+
+    def stream() -> None:
+        with httpx.stream("GET", f"{server.url}/jobs/{job_id}/events", headers={"Authorization": f"Bearer {ALICE}"},
+                          timeout=60) as r:
+            for _ in r.iter_lines():
+                if stop.is_set():
+                    return
+
+    threads = [threading.Thread(target=stream, daemon=True) for _ in range(4)]
+    before = sum(api.cpu_times()[:2])
+    for t in threads:
+        t.start()
+    time.sleep(3)
+    used = sum(api.cpu_times()[:2]) - before
+    # every stream polls 5 times a second: 60 reads (and parses) of 30 MB took the API tens of seconds
+    assert used < 1.0, used
+    t = time.monotonic()
+    assert server.client.get("/health").status_code == 200
+    assert time.monotonic() - t < 0.5
+    stop.set()
+    # the status still shows the spec, as stored
+    assert len(server.job(job_id)["spec"]["output"]["probes"]) == 1_500_000
+    assert server.client.delete(f"/jobs/{job_id}").status_code in (200, 202)
+    for t in threads:
+        t.join(30)
