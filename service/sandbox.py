@@ -132,7 +132,12 @@ def run_limited(fn: Callable[..., Any], args: tuple, *, memory_bytes: int, time_
     if kind == "memory":
         raise SandboxMemory(f"over {memory_bytes} bytes")
     if kind == "raised":
-        raise value
+        # a local naming the exception would put this frame, the frames below it in the traceback
+        # and their locals (the upload itself) in a reference cycle that only the collector frees
+        try:
+            raise value
+        finally:
+            del value
     raise SandboxCrashed(str(value))
 
 

@@ -85,3 +85,20 @@ def test_status_polls_and_event_streams_do_not_read_the_spec(server):
     assert server.client.delete(f"/jobs/{job_id}").status_code in (200, 202)
     for t in threads:
         t.join(30)
+
+
+# --- item 2: a rejected upload's memory goes with its request -------------------------------------
+
+
+def test_rejected_large_uploads_leave_no_memory_behind(server):
+    pid = server.proc.pid
+    assert server.client.get("/health").status_code == 200
+    zeros = b"\0" * (40 * 2**20)  # not a mesh: rejected by admission (422) after the whole body is read
+    r = server.submit(cantilever(16), mesh=zeros, filename="zeros.stl")
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "mesh"], r.text[:300]
+    before = rss_mb(pid)
+    for _ in range(6):
+        assert server.submit(cantilever(16), mesh=zeros, filename="zeros.stl").status_code == 422
+    grown = rss_mb(pid) - before
+    # each one was held by a reference cycle (the exception's traceback) until the collector ran
+    assert grown < 60, f"API resident memory grew {grown:.0f} MB over 6 rejected 40 MB uploads"

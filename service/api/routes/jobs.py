@@ -14,9 +14,12 @@ from fastapi import APIRouter, File, Form, Header, HTTPException, Query, Request
 from fastapi.responses import FileResponse, StreamingResponse
 
 from ...admission import Rejected
-from ...jobs import QueueFull, QueueUnavailable, cancel_or_delete, submit
-from ...store import IdempotencyConflict, JobStatus
-from ..deps import JobBriefDep, JobDep, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
+from ...jobs import QueueFull, QueueUnavailable, Submitted, cancel_or_delete, submit
+from ...queue import Queue
+from ...settings import Settings
+from ...storage import Storage
+from ...store import IdempotencyConflict, JobStatus, JobStore
+from ..deps import JobBriefDep, JobDep, Principal, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
 from ..events import job_events, last_seen
 from ..models import JobOut, JobPage, job_json, job_out
 
@@ -61,34 +64,47 @@ def create_job(
         str | None, Header(min_length=1, max_length=255, description="Repeat-safe submission: same key, same job.")
     ] = None,
 ) -> JobOut:
+    outcome = _submit(settings, store, storage, queue, principal, spec, mesh, idempotency_key)
+    if isinstance(outcome, HTTPException):
+        # raised here, after the frames that held the upload have returned: an exception keeps its
+        # traceback's frames and their locals, and the framework's handling of it makes reference
+        # cycles that only the garbage collector frees (60 MB a rejected upload until it ran)
+        raise outcome
+    response.headers["Location"] = f"/jobs/{outcome.job.id}"
+    if not outcome.created:
+        response.headers["Idempotent-Replayed"] = "true"
+    return job_out(outcome.job)
+
+
+def _submit(settings: Settings, store: JobStore, storage: Storage, queue: Queue, principal: Principal,
+            spec: UploadFile | str, mesh: UploadFile | None, idempotency_key: str | None) -> Submitted | HTTPException:
+    """:func:`service.jobs.submit` on the upload; a refusal is returned, not raised (see create_job)."""
     spec_text = _spec_text(spec, settings.max_spec_bytes)
+    if isinstance(spec_text, HTTPException):
+        return spec_text
     data = mesh.file.read() if mesh is not None else None
     try:
-        done = submit(store, storage, queue, settings, spec_text=spec_text, mesh=data,
+        return submit(store, storage, queue, settings, spec_text=spec_text, mesh=data,
                       mesh_filename=mesh.filename if mesh is not None else None, idempotency_key=idempotency_key,
                       owner=principal.owner)
     except Rejected as exc:
-        raise HTTPException(exc.status_code, detail=exc.errors) from None
+        return HTTPException(exc.status_code, detail=exc.errors)
     except IdempotencyConflict as exc:
-        raise HTTPException(status.HTTP_409_CONFLICT, detail=str(exc)) from None
+        return HTTPException(status.HTTP_409_CONFLICT, detail=str(exc))
     except QueueFull as exc:
-        raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS, detail=str(exc),
-                            headers={"Retry-After": str(exc.retry_after)}) from None
+        return HTTPException(status.HTTP_429_TOO_MANY_REQUESTS, detail=str(exc),
+                             headers={"Retry-After": str(exc.retry_after)})
     except QueueUnavailable as exc:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc)) from None
-    response.headers["Location"] = f"/jobs/{done.job.id}"
-    if not done.created:
-        response.headers["Idempotent-Replayed"] = "true"
-    return job_out(done.job)
+        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc))
 
 
-def _spec_text(spec: UploadFile | str, limit: int) -> str | bytes:
+def _spec_text(spec: UploadFile | str, limit: int) -> str | bytes | HTTPException:
     """The spec's text, or 413 naming ``spec`` when it is over ``limit`` bytes. Read no further than
     that: every status poll returns the stored spec, so its size is what each poll costs."""
     text = spec if isinstance(spec, str) else spec.file.read(limit + 1)
     size = len(text.encode("utf-8", "surrogatepass")) if isinstance(text, str) else len(text)
     if size > limit:
-        raise HTTPException(status.HTTP_413_REQUEST_ENTITY_TOO_LARGE, detail=[{
+        return HTTPException(status.HTTP_413_REQUEST_ENTITY_TOO_LARGE, detail=[{
             "loc": ["body", "spec"], "type": "too_large",
             "msg": f"the spec is over {limit} bytes ({limit / 2**20:g} MiB), this server's limit for a job spec "
                    "(VOXELASTIC_MAX_SPEC_BYTES); a spec this large is mostly probes or polygon points: "
