@@ -372,3 +372,22 @@ def test_a_part_far_from_the_origin_solves_as_it_does_at_the_origin(method):
     near, far = stretched(0.0), stretched(1e6)
     np.testing.assert_allclose(near, [5e-4, -1.5e-5, -1.5e-5], rtol=2e-3)  # u_x = x / 1000, u_y = -nu y / 1000
     np.testing.assert_allclose(far, near, rtol=1e-6, atol=1e-10)
+
+
+def test_probes_on_the_surface_are_in_the_solid_also_through_a_float32_stl():
+    """A probe at a mesh vertex or on a face (0.65 is 0.64999998 in a float32 STL, so the nominal point
+    lies 2e-8 m outside) samples the element it touches; it used to read as outside (NaN)."""
+    from engine import simulate
+
+    mesh = trimesh.creation.box(bounds=[[0, 0, 0], [1, 0.65, 0.65]]).export(file_type="stl")
+    hold = {"kind": "displacement", "value": [0, None, None], "region": {"box": [[-1, -1, -1], [0.01, 1, 1]]},
+            "facing": {"direction": [-1, 0, 0], "max_angle_deg": 30}}
+    pull = {"kind": "traction", "value": [1e5, 0, 0], "region": {"box": [[0.99, -1, -1], [2, 1, 1]]},
+            "facing": {"direction": [1, 0, 0], "max_angle_deg": 30}}
+    probes = [[0.5, 0.3, 0.3], [1.0, 0.3, 0.3], [0.5, 0.65, 0.3], [1.0, 0.65, 0.65], [0.5, 0.3, 0.65 + 1e-3]]
+    spec = {"geometry": {"mesh": "bar.stl"}, "grid": {"resolution": 8}, "method": {"kind": "dg", "degree": 1},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.0}, "boundaries": [hold, pull],
+            "output": {"fields": ["displacement"], "probes": probes, "surface": False}}
+    u = simulate(spec, mesh, filename="bar.stl").fields.probes["displacement"]
+    np.testing.assert_allclose(u[:4, 0], 1e-2 * np.array([0.5, 1.0, 0.5, 1.0]), rtol=1e-6)  # u_x = sigma x / E
+    assert np.isnan(u[4]).all()  # 1 mm outside is outside

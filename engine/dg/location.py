@@ -14,6 +14,12 @@ from ..geometry.surface import Surface, point_triangle_distance
 from ..geometry.winding import inside
 from .elements import Elements
 
+# A point this close to the surface is on it: the mesh's own vertices and face points given as
+# probes, up to the round-off of placing and scaling them (ON_SURFACE cells) and of the file's
+# numbers (ROUND_OFF of the part's size: a float32 STL stores 0.65 as 0.64999998)
+ON_SURFACE = 1e-9
+ROUND_OFF = 1e-6
+
 
 def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarray) -> np.ndarray:
     """Element [N] containing each point, -1 outside the material (surface points count as inside)."""
@@ -22,9 +28,11 @@ def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarr
     grid = elements.grid
     # the winding number costs O(points x triangles): only points in cut cells need it. A point
     # strictly inside a full cell is in that cell's element, one in a cell without pieces is outside
+    lower, upper = surface.bounds
+    tol = max(ON_SURFACE, ROUND_OFF * float(np.linalg.norm(upper - lower)) / grid.spacing)  # [cells]
     rel = (points - np.asarray(grid.origin)) / grid.spacing
     cell = np.floor(rel).astype(np.int64)
-    interior = np.all((rel - cell > 1e-9) & (rel - cell < 1 - 1e-9), axis=1)
+    interior = np.all((rel - cell > tol) & (rel - cell < 1 - tol), axis=1)
     interior &= np.all((cell >= 0) & (cell < np.asarray(grid.shape)), axis=1)
     lin = np.full(len(points), -1, dtype=np.int64)
     lin[interior] = grid.linear_index(cell[interior])
@@ -39,13 +47,25 @@ def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarr
         ok[rest] = inside(surface.vertices, surface.faces, points[rest])
         if np.any(ok):
             out[ok] = owners(elements, cut, points[ok])
+        # the winding number is 1/2 on the surface itself, and a probe placed on a face or a vertex
+        # (from the mesh file) falls either way: it is in the piece whose surface it lies on
+        on = np.nonzero(rest & ~ok)[0]
+        if len(on):
+            gap = np.full(len(on), np.inf)
+            found = owners(elements, cut, points[on], distances=gap, tol=tol)
+            touching = gap <= tol * grid.spacing
+            out[on[touching]] = found[touching]
     return out
 
-def owners(elements: Elements, cut: CutCells, points: np.ndarray) -> np.ndarray:
+def owners(elements: Elements, cut: CutCells, points: np.ndarray, distances: np.ndarray | None = None,
+           tol: float = ON_SURFACE) -> np.ndarray:
     """Element [N] of points known to lie in the solid or on its surface, -1 where no cell around
     holds a piece. A point on a cell face looks in the cells on both sides. Among several pieces the
     one owning the nearest surface triangle wins (exact: the segment from a point to another piece
-    of its cell leaves the solid through the point's own piece's surface)."""
+    of its cell leaves the solid through the point's own piece's surface); a point within ``tol``
+    cells of a cell face counts as on it. ``distances`` [N], if
+    given, receives each point's distance [m] to the surface triangles of the chosen piece (inf for
+    a piece without any)."""
     grid = elements.grid
     h = grid.spacing
     out = np.full(len(points), -1, dtype=np.int64)
@@ -56,7 +76,6 @@ def owners(elements: Elements, cut: CutCells, points: np.ndarray) -> np.ndarray:
     tri_order = np.argsort(cut.boundary_piece, kind="stable")
     tri_piece = cut.boundary_piece[tri_order]
     rel = (np.asarray(points) - np.asarray(grid.origin)) / h
-    tol = 1e-9
     for q, r in enumerate(rel):
         lo, hi = np.floor(r - tol).astype(np.int64), np.floor(r + tol).astype(np.int64)
         cand = []
@@ -67,7 +86,7 @@ def owners(elements: Elements, cut: CutCells, points: np.ndarray) -> np.ndarray:
                 cand.extend(order[i:j].tolist())
         if not cand:
             continue
-        if len(cand) == 1:
+        if len(cand) == 1 and distances is None:
             out[q] = elements.piece_element[cand[0]]
             continue
         best, best_d = cand[0], np.inf
@@ -81,6 +100,8 @@ def owners(elements: Elements, cut: CutCells, points: np.ndarray) -> np.ndarray:
                 best = piece  # an interior (full) piece: the point is inside it unless a surface is nearer
                 best_d = np.inf
         out[q] = elements.piece_element[best]
+        if distances is not None:
+            distances[q] = best_d
     return out
 
 
