@@ -167,6 +167,17 @@ def select_patch(region, facets: np.ndarray, name: str) -> tuple[np.ndarray, np.
     pieces, source = region.clip(facets)
     if len(pieces) and _measure_and_normal(pieces)[0].sum() > 0:
         return pieces, source
+    if isinstance(region, Facing):  # the region may hold surface that faces another way
+        inner, _ = region.region.clip(facets)
+        area, normals = _measure_and_normal(inner) if len(inner) else (np.zeros(0), None)
+        if area.sum() > 0:
+            mean = (area[:, None] * normals).sum(axis=0)
+            mostly = f"; it faces mostly {_direction(mean)}" if np.linalg.norm(mean) > 0.5 * area.sum() else ""
+            raise BoundaryError(
+                f"{name}: none of the {area.sum():.4g} {'m^2' if facets.shape[-1] == 3 else 'm'} of surface in its "
+                f"region faces within {region.max_angle_deg:g} degrees of {_direction(region.direction)}{mostly}; "
+                "`facing.direction` is the outward normal of the facets to keep"
+            )
     where = ""
     gap = region_distance(region, facets.reshape(-1, facets.shape[-1]))
     if gap is not None and len(gap):
@@ -176,6 +187,11 @@ def select_patch(region, facets: np.ndarray, name: str) -> tuple[np.ndarray, np.
         f"{name}: the region holds no part of the mesh surface{facing}{where}; every boundary acts on the surface "
         "inside its region: move or widen the region so that it takes in the surface it should act on"
     )
+
+
+def _direction(vector: np.ndarray) -> str:
+    unit = np.asarray(vector, dtype=float) / np.linalg.norm(vector)
+    return "(" + ", ".join(f"{c:.3g}" for c in np.where(np.abs(unit) < 5e-4, 0.0, unit)) + ")"
 
 
 def region_distance(region, points: np.ndarray) -> np.ndarray | None:

@@ -151,6 +151,13 @@ def test_two_holds_that_disagree_on_a_common_patch_are_an_error_naming_both(meth
     assert np.isfinite(r.fields.probes["displacement"]).all()
 
 
+def test_a_facing_that_keeps_nothing_says_which_way_the_surface_in_its_region_faces():
+    backwards = {**CLAMP, "facing": {"direction": [1, 0, 0], "max_angle_deg": 10}}  # the end face faces -x
+    with pytest.raises(BoundaryError, match=r"clamp: none of the 1.4 m\^2 of surface in its region faces within 10 "
+                                            r"degrees of \(1, 0, 0\); it faces mostly \(-1, 0, 0\)"):
+        simulate(bar_job({"kind": "staggered"}, 0.5, [backwards]), bar_stl(), filename="bar.stl")
+
+
 def test_a_hold_over_most_of_the_surface_is_a_warning_that_names_the_half_space_rule():
     # the user meant x <= 0.1 but gave the normal that holds x >= 0.1: nearly the whole bar
     wrong = {**CLAMP, "region": {"halfspace": {"point": [0.1, 0, 0], "normal": [-1, 0, 0]}}}
