@@ -117,16 +117,37 @@ def result_estimate(spec_json: str, grid_shape: tuple[int, ...], triangles: int)
                                  surface_vertices=vertices, probes=len(output.get("probes", [])))
 
 
-def check_space(root: str | Path, need: int, what: str) -> None:
-    """Refuse (507, ``admission.Rejected``) when the file system of ``root`` has less than ``need``
-    bytes free: better now than after the solve, when the result cannot be written."""
-    free = free_bytes(root)
-    if free < need:
-        from .admission import Rejected
+def check_space(root: str | Path, need: int, what: str, sized_by: tuple[str, ...] = ("grid",)) -> None:
+    """Refuse when the file system of ``root`` cannot take ``need`` bytes: 422 naming the spec fields
+    ``sized_by`` (dotted paths, the first one carries the error) when the need is over the disk's
+    whole size, which no wait can change; 507 when it is only over the space free now (better
+    than after the solve, when the result cannot be written). Raises ``admission.Rejected``."""
+    from .admission import Rejected
 
-        raise Rejected(STATUS, [{"loc": ["body", "spec", "grid"], "type": "insufficient_storage",
-                                 "msg": f"the server has {_size(free)} free for results, {what} needs up to "
+    usage = shutil.disk_usage(root)
+    if need > usage.total:
+        fields = " and ".join(sized_by)
+        raise Rejected(422, [{"loc": ["body", "spec", *_path(sized_by[0])], "type": "value_error",
+                              "msg": f"{what} needs up to {_size(need)}, more than the whole disk this server keeps "
+                                     f"results on ({_size(usage.total)}); its size is set by {fields}: lower "
+                                     "them (or output fewer fields)"}])
+    if usage.free < need:
+        raise Rejected(STATUS, [{"loc": ["body", "spec", *_path(sized_by[0])], "type": "insufficient_storage",
+                                 "msg": f"the server has {_size(usage.free)} free for results, {what} needs up to "
                                         f"{_size(need)}; retry later or use a coarser grid or fewer fields"}])
+
+
+def _path(dotted: str) -> list:
+    return [int(p) if p.isdigit() else p for p in dotted.split(".")]
+
+
+def result_size_fields(spec_json: str) -> tuple[str, ...]:
+    """The spec fields that set a job's result size, the one most likely to be the culprit first."""
+    import json
+
+    analysis = json.loads(spec_json).get("analysis", {})
+    steps = ("analysis.steps",) if analysis.get("kind") != "static" and int(analysis.get("steps", 0)) > 0 else ()
+    return (*steps, "grid", "output.fields")
 
 
 def rejection(exc: OSError, what: str):

@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass
 
 from .admission import admit
-from .faults import check_space, is_storage_fault, rejection, result_estimate
+from .faults import check_space, is_storage_fault, rejection, result_estimate, result_size_fields
 from .queue import Queue
 from .settings import Settings
 from .storage import Storage, display_name, new_job_id
@@ -84,7 +84,7 @@ def submit(
     )
     # 507 now rather than a failed write after the solve (issue 18)
     check_space(storage.root, result_estimate(admitted.spec_json, admitted.grid_shape, admitted.triangles)
-                + len(mesh or b""), "this job's result")
+                + len(mesh or b""), "this job's result", result_size_fields(admitted.spec_json))
     if mesh:
         try:
             storage.save_mesh(job.id, admitted.suffix, mesh)

@@ -102,3 +102,15 @@ def test_rejected_large_uploads_leave_no_memory_behind(server):
     grown = rss_mb(pid) - before
     # each one was held by a reference cycle (the exception's traceback) until the collector ran
     assert grown < 60, f"API resident memory grew {grown:.0f} MB over 6 rejected 40 MB uploads"
+
+
+# --- item 3: a result larger than the whole disk is the spec's fault, not the server's ------------
+
+
+def test_a_result_larger_than_the_disk_is_422_naming_steps_and_grid(server):
+    r = server.submit(cantilever(16, {"kind": "dynamic", "time_step": 1e-3, "steps": 10**9}))
+    assert r.status_code == 422, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "spec", "analysis", "steps"], err
+    assert "more than the whole disk" in err["msg"] and "analysis.steps and grid" in err["msg"], err
+    assert "retry" not in err["msg"]
