@@ -194,7 +194,7 @@ def check_balance(points: np.ndarray, axis: np.ndarray, loads: np.ndarray, modes
             raise UnbalancedLoadError(
                 f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body free, and its "
                 f"loads do not balance: net force {np.round(force, 12).tolist()} N, net torque about its centroid "
-                f"{np.round(torque, 12).tolist()} N m (total load {size:.6g} N); add a displacement boundary "
-                "that holds every component (a clamp region must contain the samples of all components: make it at "
-                "least one cell thick) or balance the loads"
+                f"{np.round(torque, 12).tolist()} N m (total load {size:.6g} N); hold every component on a patch "
+                "that spans more than a grid cell each way along the surface (a strip narrower than a cell, or a body "
+                "thinner than one, can leave a rotation free: refine the grid), or balance the loads"
             )

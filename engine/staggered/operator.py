@@ -445,8 +445,9 @@ def describe_thin_features(level: Level, mech: Mechanisms) -> str:
         f"(h = {h:.4g} m) that lies inside one cell layer (walls or rods filling at most {mech.fill:.0%} of their "
         f"cells, about {thick:.3g} m thick for a wall), where the staggered grid has one sample across the thickness "
         f"and nothing resists moving it across; the samples lie between {fmt(where.min(axis=0))} and "
-        f"{fmt(where.max(axis=0))}{unit}. Refine the grid so that every wall crosses a grid plane (a grid.cell_size no "
-        f"larger than the thinnest wall's thickness, here about {thick:.3g} m, always does), thicken the walls, or use "
+        f"{fmt(where.max(axis=0))}{unit}. Refine the grid so that every wall crosses a grid plane (a grid.cell_size "
+        f"smaller than the thinnest wall's thickness, here about {thick:.3g} m, does: a wall exactly one cell thick "
+        f"can lie between two planes), thicken the walls, or use "
         f"method.kind 'dg'"
     )
 
