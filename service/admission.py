@@ -110,11 +110,23 @@ def parse_spec(spec_text: str | bytes):
         raise Rejected(422, [_error(["body", "spec"], reason, "json_invalid")]) from None
 
 
-def _engine_error(message: str) -> dict[str, Any]:
-    """An engine error message ('field.path: reason') as an error entry at that field."""
+_LOOP = re.compile(r"^polygon '[^']*': loop (\d+) ")
+
+
+def _engine_error(message: str, source: list | None = None, scale: float | None = None) -> dict[str, Any]:
+    """An engine error message ('field.path: reason') as an error entry at that field.
+
+    ``source``: where the geometry came from (``["body", "mesh"]``, or the spec's polygon), which
+    gets the messages that name no field; ``scale``: geometry.scale, blamed for out-of-range
+    coordinates only when it is not 1 (at 1 the input's own coordinates are out of range).
+    """
+    source = source or ["body", "mesh"]
     path, reason = _split_path(message)
+    if path == ["geometry", "scale"] and scale == 1.0:
+        return _error(source, reason)
     if path[:2] == ["geometry", "mesh"] or not path:
-        return _error(["body", "mesh"], message)
+        loop = _LOOP.match(message) if source[-1] == "polygon" else None
+        return _error([*source, int(loop.group(1))] if loop else source, message)
     return _error(["body", "spec", *path], reason)
 
 
@@ -163,7 +175,8 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     except InflateLimitError as exc:
         raise Rejected(413, [_error(["body", "mesh"], f"{exc} (VOXELASTIC_MAX_INFLATED_BYTES)", "too_large")]) from None
     except VoxelasticError as exc:
-        raise Rejected(422, [_engine_error(str(exc))]) from None
+        source = ["body", "mesh"] if uses_mesh else ["body", "spec", "geometry", "polygon"]
+        raise Rejected(422, [_engine_error(str(exc), source, spec.geometry.scale)]) from None
     except (MemoryError, RecursionError):
         raise
     except Exception:  # a loader crash on hostile bytes is still bad input, not a 500

@@ -114,3 +114,32 @@ def test_a_result_larger_than_the_disk_is_422_naming_steps_and_grid(server):
     assert err["loc"] == ["body", "spec", "analysis", "steps"], err
     assert "more than the whole disk" in err["msg"] and "analysis.steps and grid" in err["msg"], err
     assert "retry" not in err["msg"]
+
+
+# --- item 4: errors of a polygon input are reported at spec.geometry.polygon ----------------------
+
+
+def polygon_spec(*loops) -> dict:
+    return {"dimension": 2, "grid": {"resolution": 16, "padding": 1}, "method": {"kind": "staggered"},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000},
+            "boundaries": [{"kind": "displacement", "region": {"box": [[-0.1, -0.1], [0.05, 1.1]]}, "value": [0, 0]}],
+            "loads": {"gravity": [0, -9.81]}, "analysis": {"kind": "static"}, "geometry": {"polygon": list(loops)}}
+
+
+@pytest.mark.parametrize("loops, loc, words", [
+    ([[[0, 0], [1, 1], [1, 0], [0, 1]]], ["body", "spec", "geometry", "polygon", 0], "encloses no area"),  # a bowtie
+    ([[[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 0]] * 5], ["body", "spec", "geometry", "polygon", 1], "loop 1 encloses no area"),
+    ([[[0, 0], [1e200, 0], [1e200, 1e200]]], ["body", "spec", "geometry", "polygon"], "reaches coordinates of 1e+200 m"),
+])
+def test_polygon_errors_are_reported_at_the_polygon(server, loops, loc, words):
+    r = server.submit(polygon_spec(*loops), mesh=None)
+    assert r.status_code == 422, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == loc and words in err["msg"], err
+
+
+def test_a_scale_that_takes_a_polygon_out_of_range_is_still_blamed_on_scale(server):
+    spec = polygon_spec([[0, 0], [1, 0], [1, 1], [0, 1]])
+    spec["geometry"]["scale"] = 1e150
+    (err,) = server.submit(spec, mesh=None).json()["detail"]
+    assert err["loc"] == ["body", "spec", "geometry", "scale"], err
