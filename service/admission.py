@@ -50,11 +50,24 @@ class Rejected(Exception):
     expected = True  # bad input, not a fault of the service: nothing to log
 
     def __init__(self, status_code: int, errors: list[dict[str, Any]]):
+        errors = capped_errors(errors)
         super().__init__("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in errors))
         self.status_code, self.errors = status_code, errors
 
     def __reduce__(self):  # pickled by the admission child: rebuild from the fields, not the message
         return (Rejected, (self.status_code, self.errors))
+
+
+MAX_ERRORS = 50  # a spec with 100,000 bad coordinates made an 11 MB answer; the first ones show the pattern
+
+
+def capped_errors(errors: list[dict[str, Any]], limit: int = MAX_ERRORS) -> list[dict[str, Any]]:
+    """The first ``limit`` error entries, then one saying how many more were found."""
+    if len(errors) <= limit or (len(errors) == limit + 1 and errors[-1].get("type") == "too_many_errors"):
+        return errors  # (capped already: a Rejected is rebuilt from its entries when it leaves the child)
+    more = len(errors) - limit
+    return [*errors[:limit], _error(["body"], f"{more} more error{'s' if more > 1 else ''} not listed "
+                                    f"({len(errors)} in all; the first {limit} are shown)", "too_many_errors")]
 
 
 def _error(loc: list, msg: str, kind: str = "value_error") -> dict[str, Any]:

@@ -143,3 +143,19 @@ def test_a_scale_that_takes_a_polygon_out_of_range_is_still_blamed_on_scale(serv
     spec["geometry"]["scale"] = 1e150
     (err,) = server.submit(spec, mesh=None).json()["detail"]
     assert err["loc"] == ["body", "spec", "geometry", "scale"], err
+
+
+# --- item 5: an error list is capped --------------------------------------------------------------
+
+
+def test_a_spec_with_100k_errors_gets_the_first_50_and_a_count(server):
+    loop = [[i, "x"] for i in range(100_000)]
+    body = json.dumps(polygon_spec(loop)).encode()  # 1.5 MB: a file part (a text field stops at 1 MB)
+    r = server.client.post("/jobs", files={"spec": ("job.json", body)})
+    assert r.status_code == 422 and len(r.content) < 20_000, (r.status_code, len(r.content))
+    detail = r.json()["detail"]
+    assert len(detail) == 51
+    assert detail[0] == {"loc": ["body", "spec", "geometry", "polygon", 0, 0, 1], "msg": "expected a number, got 'x'",
+                         "type": "value_error"}
+    assert detail[-1] == {"loc": ["body"], "msg": "99950 more errors not listed (100000 in all; the first 50 are shown)",
+                          "type": "too_many_errors"}

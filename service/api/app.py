@@ -22,6 +22,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from .. import sandbox
+from ..admission import capped_errors
 from ..queue import make_queue
 from ..settings import Settings, get_settings
 from ..storage import Storage
@@ -133,7 +134,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
         # the same compact shape as our own 422s; echoing the input back would return whole uploads
-        detail = [_plain(e, exc.body) for e in exc.errors()]
+        detail = capped_errors([_plain(e, exc.body) for e in exc.errors()])
         return JSONResponse({"detail": detail}, status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
