@@ -90,6 +90,11 @@ class Settings(BaseSettings):
     )
     admission_time_limit: float = Field(120.0, gt=0, description="Wall time to check one submission [s] (422 above).")
 
+    preview_renders: int = Field(1, ge=1, le=64, description="Preview pictures rendered at once (each a "
+                                 "process importing VTK); further requests wait their turn.")
+    preview_wait: float = Field(20.0, gt=0, description="How long a preview request waits for its turn "
+                                "before 503 + Retry-After [s].")
+
     # --- access ---------------------------------------------------------------------------------
     tokens: Annotated[list[str], NoDecode] = Field(
         default_factory=list, repr=False, description="Bearer tokens (comma-separated); empty = no authentication."

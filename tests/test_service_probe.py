@@ -20,7 +20,7 @@ ALICE, BOB, ADMIN = "alice-token-0123456789", "bob-token-9876543210", "admin-tok
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     srv = Server(tmp_path_factory.mktemp("probe") / "data", shared_cache_dir(tmp_path_factory), workers=1,
-                 tokens=f"{ALICE},{BOB}", admin_tokens=ADMIN)
+                 tokens=f"{ALICE},{BOB}", admin_tokens=ADMIN, preview_wait=1)
     srv.client.headers["Authorization"] = f"Bearer {ALICE}"
     srv.start()
     yield srv
@@ -159,3 +159,51 @@ def test_a_spec_with_100k_errors_gets_the_first_50_and_a_count(server):
                          "type": "value_error"}
     assert detail[-1] == {"loc": ["body"], "msg": "99950 more errors not listed (100000 in all; the first 50 are shown)",
                           "type": "too_many_errors"}
+
+
+# --- item 6: preview renders are bounded ----------------------------------------------------------
+
+
+def test_preview_renders_run_one_at_a_time_and_the_rest_get_503_with_retry_after(server):
+    ids = [server.submit_ok(cantilever(16)) for _ in range(3)]
+    for job_id in ids:
+        assert server.wait(job_id)["status"] == "succeeded"
+    most, done = 0, threading.Event()
+
+    def count() -> None:
+        nonlocal most
+        while not done.is_set():
+            renders = [p for p in server.children() if "engine.preview" in " ".join(_cmdline(p))]
+            most = max(most, len(renders))
+            time.sleep(0.02)
+
+    watcher = threading.Thread(target=count, daemon=True)
+    watcher.start()
+    answers: dict[str, httpx.Response] = {}
+
+    def fetch(job_id: str) -> None:
+        answers[job_id] = server.client.get(f"/jobs/{job_id}/preview.png")
+
+    fetches = [threading.Thread(target=fetch, args=(j,)) for j in ids]
+    for t in fetches:
+        t.start()
+    for t in fetches:
+        t.join(120)
+    done.set()
+    watcher.join(5)
+    codes = sorted(r.status_code for r in answers.values())
+    # VOXELASTIC_PREVIEW_WAIT=1 here: a render takes 2-3 s, so the ones waiting behind it give up
+    assert most == 1 and codes[0] == 200 and codes[-1] == 503, (most, codes)
+    for r in answers.values():
+        if r.status_code == 503:
+            assert r.headers["retry-after"] == "5" and "retry in a few seconds" in r.json()["detail"]
+    for job_id in ids:  # one after another, every picture comes
+        r = server.client.get(f"/jobs/{job_id}/preview.png")
+        assert r.status_code == 200 and r.content.startswith(b"\x89PNG"), r.status_code
+
+
+def _cmdline(p: psutil.Process) -> list[str]:
+    try:
+        return p.cmdline()
+    except psutil.Error:
+        return []

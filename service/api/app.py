@@ -28,6 +28,7 @@ from ..settings import Settings, get_settings
 from ..storage import Storage
 from ..store import JobStore
 from .deps import require_token
+from .preview import RenderGate
 from .routes import jobs, system
 
 log = logging.getLogger("voxelastic.api")
@@ -125,6 +126,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         redoc_url=None,
     )
     app.state.settings = settings
+    app.state.render_gate = RenderGate(settings.preview_renders, settings.preview_wait)
     app.add_middleware(UploadLimit, limit=settings.max_upload_bytes)
     authorized = [Depends(require_token)]
     app.include_router(system.public)

@@ -3,11 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import threading
-from pathlib import Path
 from typing import Annotated
 
 from fastapi import APIRouter, File, Form, Header, HTTPException, Query, Request, Response, UploadFile, status
@@ -211,43 +206,23 @@ for _route, (_media, _what) in VIEWER_FILES.items():
     _viewer_route(_route, _media, _what)
 
 
-PREVIEW_SECONDS = 120  # rendering the bundled example takes 2-3 s; a huge surface may take longer
-
-
 @router.get(
     "/{job_id}/preview.png",
     response_class=FileResponse,
     responses={**_ERRORS, 200: {"content": {"image/png": {}}, "description": "The deformed surface, coloured."},
                409: {"description": "Not (successfully) finished."},
-               503: {"description": "The picture could not be rendered (the reason is given)."}},
+               503: {"description": "The picture could not be rendered (the reason is given), or other pictures "
+                                    "are being rendered (see Retry-After)."}},
     summary="A picture of the result: deformed surface coloured by von Mises, undeformed outline",
 )
-def get_preview(job: JobDep, storage: StorageDep) -> FileResponse:
+def get_preview(request: Request, job: JobDep, storage: StorageDep) -> FileResponse:
     path = storage.result_file(job.id, ".png")
     if job.status == JobStatus.succeeded.value and not path.is_file():
         if not json.loads(job.spec).get("output", {}).get("surface", True):
             raise HTTPException(status.HTTP_404_NOT_FOUND,
                                 detail=f"job {job.id} has no picture: its output has no surface (output.surface is false)")
-        _render(storage.result_path(job.id), path)
+        request.app.state.render_gate.render(storage.result_path(job.id), path)
     return _finished_file(job, path, "image/png")
-
-
-def _render(result: Path, picture: Path) -> None:
-    """Render the picture once, beside the result (cached with it, deleted with it), in a child
-    process: VTK's memory and time never land in the API process or a job's worker limits."""
-    tmp = picture.with_name(f".{picture.stem}.{os.getpid()}.{threading.get_ident()}.tmp.png")  # PNG by its suffix
-    try:
-        out = subprocess.run([sys.executable, "-m", "engine.preview", str(result), str(tmp)], capture_output=True,
-                             text=True, timeout=PREVIEW_SECONDS)
-        if out.returncode != 0 or not tmp.is_file():
-            reason = (out.stderr.strip().splitlines() or ["no output"])[-1]
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=f"the picture could not be rendered: {reason}")
-        os.replace(tmp, picture)  # concurrent first requests render twice; either picture is the same
-    except subprocess.TimeoutExpired:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
-                            detail=f"the picture could not be rendered in {PREVIEW_SECONDS} s") from None
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 @router.delete(
