@@ -207,3 +207,25 @@ def _cmdline(p: psutil.Process) -> list[str]:
         return p.cmdline()
     except psutil.Error:
         return []
+
+
+# --- item 7: HEAD wherever GET is -----------------------------------------------------------------
+
+
+def test_head_answers_the_headers_of_get_without_a_body(server):
+    job_id = server.submit_ok(cantilever(16))
+    assert server.wait(job_id)["status"] == "succeeded"
+    anonymous = httpx.Client(base_url=server.url, timeout=30)
+    for c, path in [(anonymous, "/health"), (anonymous, "/"), (server.client, f"/jobs/{job_id}"),
+                    (server.client, f"/jobs/{job_id}/result"), (server.client, f"/jobs/{job_id}/result.xdmf"),
+                    (server.client, f"/jobs/{job_id}/events"), (server.client, "/jobs"), (server.client, "/metrics")]:
+        got, head = c.get(path), c.head(path)
+        assert head.status_code == got.status_code == 200, (path, head.status_code, got.status_code)
+        assert head.content == b"" and head.headers["content-type"] == got.headers["content-type"], path
+    r = server.client.head(f"/jobs/{job_id}/result")
+    assert int(r.headers["content-length"]) == server.job(job_id)["result"]["bytes"]
+    assert anonymous.head(f"/jobs/{job_id}").status_code == 401
+    assert server.client.head("/jobs/" + "A" * 22).status_code == 404
+    # the schema documents GET alone
+    doc = server.client.get("/openapi.json").json()
+    assert not any("head" in ops for ops in doc["paths"].values())

@@ -12,10 +12,11 @@ import threading
 from functools import lru_cache
 from contextlib import asynccontextmanager
 
-from fastapi import Depends, FastAPI, Request
+from fastapi import APIRouter, Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import FormData
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -129,6 +130,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.render_gate = RenderGate(settings.preview_renders, settings.preview_wait)
     app.add_middleware(UploadLimit, limit=settings.max_upload_bytes)
     authorized = [Depends(require_token)]
+    for router in (system.public, jobs.router, system.router):
+        _add_head(router)
     app.include_router(system.public)
     app.include_router(jobs.router, dependencies=authorized)
     app.include_router(system.router, dependencies=authorized)
@@ -150,6 +153,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return await http_exception_handler(request, exc)
 
     return app
+
+
+def _add_head(router: APIRouter) -> None:
+    """A HEAD route beside every GET route of ``router`` (same handler, left out of the schema).
+
+    FastAPI's routes, unlike Starlette's, do not answer HEAD, though Allow names it (RFC 9110: a
+    GET resource should). The request keeps its method, so a file is not read (Starlette sends its
+    headers only) and uvicorn drops any other body.
+    """
+    present = {(r.path, m) for r in router.routes if isinstance(r, APIRoute) for m in r.methods}
+    for route in list(router.routes):
+        if isinstance(route, APIRoute) and "GET" in route.methods and (route.path, "HEAD") not in present:
+            router.add_api_route(route.path.removeprefix(router.prefix), route.endpoint, methods=["HEAD"],
+                                 response_class=route.response_class, include_in_schema=False,
+                                 name=f"{route.name}_head")
 
 
 def _plain(error: dict, body: object) -> dict:

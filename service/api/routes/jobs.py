@@ -135,13 +135,16 @@ def get_job(job: JobDep) -> Response:
     summary="Server-sent events of a job until it ends",
 )
 def job_event_stream(
+    request: Request,
     job: JobBriefDep,
     store: StoreDep,
     last_event_id: Annotated[
         str | None, Header(max_length=64, description="The id of the last event seen (a reconnecting client); "
                                                       "anything but a revision number is ignored.")
     ] = None,
-) -> StreamingResponse:
+) -> Response:
+    if request.method == "HEAD":  # the headers alone; a stream would poll until the job ends, unread
+        return Response(media_type="text/event-stream", headers={"Cache-Control": "no-cache"})
     return StreamingResponse(
         job_events(store, job.id, last_seen(last_event_id)),
         media_type="text/event-stream",
