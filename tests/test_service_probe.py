@@ -229,3 +229,17 @@ def test_head_answers_the_headers_of_get_without_a_body(server):
     # the schema documents GET alone
     doc = server.client.get("/openapi.json").json()
     assert not any("head" in ops for ops in doc["paths"].values())
+
+
+# --- item 8: a job without a surface says so for its surface file ---------------------------------
+
+
+def test_a_job_without_surface_output_says_it_wrote_no_surface_file(server):
+    spec = cantilever(16)
+    spec["output"] = {"surface": False}
+    job_id = server.submit_ok(spec)
+    assert server.wait(job_id)["status"] == "succeeded"
+    r = server.client.get(f"/jobs/{job_id}/result.surface.xdmf")
+    assert r.status_code == 404
+    assert r.json()["detail"] == f"job {job_id} wrote no surface file: its output has no surface (output.surface is false)"
+    assert server.client.get(f"/jobs/{job_id}/result.solid.xdmf").status_code == 200

@@ -16,7 +16,7 @@ from ...storage import Storage
 from ...store import IdempotencyConflict, JobStatus, JobStore
 from ..deps import JobBriefDep, JobDep, Principal, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
 from ..events import job_events, last_seen
-from ..models import JobOut, JobPage, job_json, job_out
+from ..models import JobOut, JobPage, job_json, job_out, output_surface
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -196,8 +196,13 @@ VIEWER_FILES = {  # route suffix -> (media type, what it is)
 def _viewer_route(route: str, media_type: str, what: str) -> None:
     suffix = route.removeprefix("result")
 
-    def handler(job: JobDep, storage: StorageDep) -> FileResponse:
-        return _finished_file(job, storage.result_file(job.id, suffix), media_type)
+    def handler(job: JobBriefDep, store: StoreDep, storage: StorageDep) -> FileResponse:
+        path = storage.result_file(job.id, suffix)
+        if (suffix == ".surface.xdmf" and job.status == JobStatus.succeeded.value and not path.is_file()
+                and not output_surface(store.spec_of(job.id))):
+            raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"job {job.id} wrote no surface file: its output "
+                                "has no surface (output.surface is false)")
+        return _finished_file(job, path, media_type)
 
     router.add_api_route(f"/{{job_id}}/{route}", handler, methods=["GET"], response_class=FileResponse,
                          responses={**_ERRORS, 200: {"content": {media_type: {}}, "description": what},
