@@ -243,3 +243,22 @@ def test_a_job_without_surface_output_says_it_wrote_no_surface_file(server):
     assert r.status_code == 404
     assert r.json()["detail"] == f"job {job_id} wrote no surface file: its output has no surface (output.surface is false)"
     assert server.client.get(f"/jobs/{job_id}/result.solid.xdmf").status_code == 200
+
+
+# --- item 9: a Range header that is not valid is ignored ------------------------------------------
+
+
+def test_an_invalid_range_gets_the_whole_file(server):
+    job_id = server.submit_ok(cantilever(16))
+    assert server.wait(job_id)["status"] == "succeeded"
+    whole = server.client.get(f"/jobs/{job_id}/result").content
+    for value in ("bytes=10-5", "bytes=abc", "bytes=", "bytes=1-2,9-3", "items=0-3", "bytes 0-3"):
+        r = server.client.get(f"/jobs/{job_id}/result", headers={"Range": value})
+        assert r.status_code == 200 and r.content == whole, (value, r.status_code)
+        assert "content-range" not in r.headers
+    r = server.client.get(f"/jobs/{job_id}/result", headers={"Range": "bytes=10-19"})
+    assert r.status_code == 206 and r.content == whole[10:20]
+    r = server.client.get(f"/jobs/{job_id}/result", headers={"Range": "bytes=-4"})
+    assert r.status_code == 206 and r.content == whole[-4:]
+    r = server.client.get(f"/jobs/{job_id}/result", headers={"Range": f"bytes={len(whole) + 10}-"})
+    assert r.status_code == 416  # valid, but beyond the file

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 from typing import Annotated
 
 from fastapi import APIRouter, File, Form, Header, HTTPException, Query, Request, Response, UploadFile, status
 from fastapi.responses import FileResponse, StreamingResponse
+from starlette.datastructures import Headers
+from starlette.types import Receive, Scope, Send
 
 from ...admission import Rejected
 from ...jobs import QueueFull, QueueUnavailable, Submitted, cancel_or_delete, submit
@@ -160,7 +163,34 @@ def _finished_file(job, path, media_type: str) -> FileResponse:
         )
     if not path.is_file():  # deleted between the status read and now
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"the result of job {job.id} is gone")
-    return FileResponse(path, media_type=media_type, filename=path.name)
+    return Download(path, media_type=media_type, filename=path.name)
+
+
+_RANGE_SPEC = re.compile(r"\s*(?:(\d+)-(\d*)|-\d+)\s*")
+
+
+def _valid_range(value: str) -> bool:
+    """Whether a Range header is a byte-range set as RFC 7233 writes it, every last >= its first."""
+    unit, eq, ranges = value.partition("=")
+    if not eq or unit.strip().lower() != "bytes":
+        return False
+    for part in ranges.split(","):
+        m = _RANGE_SPEC.fullmatch(part)
+        if m is None or (m.group(1) is not None and m.group(2) and int(m.group(2)) < int(m.group(1))):
+            return False
+    return True
+
+
+class Download(FileResponse):
+    """A file with Range support, where a Range header that is not valid is ignored (RFC 7233 3.1:
+    the whole file, 200) instead of Starlette's 400 "Malformed range header"; a valid one that the
+    file cannot satisfy still gets 416."""
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        given = Headers(scope=scope).get("range")
+        if given is not None and not _valid_range(given):
+            scope = {**scope, "headers": [(k, v) for k, v in scope["headers"] if k.lower() != b"range"]}
+        await super().__call__(scope, receive, send)
 
 
 @router.get(
