@@ -168,6 +168,14 @@ def test_a_hold_over_most_of_the_surface_is_a_warning_that_names_the_half_space_
     assert not any(w.startswith("clamp:") for w in r.solver.warnings)
 
 
+def test_a_solid_thin_for_its_grid_is_a_warning_only_there():
+    thin = [w for w in simulate(bar_job({"kind": "staggered"}, 0.5, [CLAMP]), bar_stl(), filename="bar.stl").solver.warnings
+            if "thin for this grid" in w]  # a 1 m bar, 2 cells across: 2V/A = 0.48 m, 0.95 cells
+    assert len(thin) == 1 and "is 0.95 cells of h = 0.5 m" in thin[0] and "method.kind 'dg'" in thin[0]
+    r = simulate(bar_job({"kind": "staggered"}, 0.25, [CLAMP]), bar_stl(), filename="bar.stl")
+    assert not any("thin for this grid" in w for w in r.solver.warnings)  # 1.9 cells
+
+
 def test_clamped_thick_sphere_converges_at_second_order():
     """Thick sphere a = 0.5, b = 1 (E = 1, nu = 0.3), pressure 1 inside, the outer surface held
     (u = 0 on the surface where |x| > 0.98): u = (A r + B / r^2) e_r, A = -B,
