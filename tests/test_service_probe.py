@@ -262,3 +262,17 @@ def test_an_invalid_range_gets_the_whole_file(server):
     assert r.status_code == 206 and r.content == whole[-4:]
     r = server.client.get(f"/jobs/{job_id}/result", headers={"Range": f"bytes={len(whole) + 10}-"})
     assert r.status_code == 416  # valid, but beyond the file
+
+
+# --- item 10: links and metrics tell nothing of other hosts or tenants ----------------------------
+
+
+def test_the_next_link_is_relative_whatever_the_host_header(server):
+    for job_id in [server.submit_ok(cantilever(16)) for _ in range(2)]:
+        assert server.wait(job_id)["status"] == "succeeded"
+    r = server.client.get("/jobs?limit=1&status=succeeded", headers={"Host": "evil.example"})
+    assert r.status_code == 200
+    nxt = r.json()["next"]
+    assert nxt.startswith("/jobs?") and "evil" not in nxt and "offset=1" in nxt and "limit=1" in nxt, nxt
+    assert "status=succeeded" in nxt
+    assert server.client.get(nxt).json()["offset"] == 1

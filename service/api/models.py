@@ -77,7 +77,8 @@ class JobPage(BaseModel):
     total: int
     limit: int
     offset: int
-    next: str | None = Field(None, description="URL of the next page, if any.")
+    next: str | None = Field(None, description="The next page, if any, as a path with its query (relative to this "
+                             "server, e.g. /jobs?limit=50&offset=50).")
 
 
 class Health(BaseModel):

@@ -123,7 +123,10 @@ def list_jobs(
                               owner=principal.owner, everyone=principal.everyone)
     nxt = None
     if offset + len(items) < total:
-        nxt = str(request.url.include_query_params(offset=offset + limit, limit=limit))
+        # path and query only: the Host header is the client's to choose, so an absolute link built
+        # from it could point anywhere (Host: evil.example)
+        url = request.url.include_query_params(offset=offset + limit, limit=limit)
+        nxt = f"{url.path}?{url.query}"
     return JobPage(items=[job_out(j) for j in items], total=total, limit=limit, offset=offset, next=nxt)
 
 
