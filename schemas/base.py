@@ -24,7 +24,16 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Annotated, Any, Union
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, WrapValidator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    WrapValidator,
+    model_validator,
+)
 from pydantic_core import PydanticCustomError
 
 Loc = tuple[Union[str, int], ...]
@@ -106,10 +115,11 @@ def _is_integer(value: Any) -> bool:
 
 def of_type(expected: str, accepts: Any) -> BeforeValidator:
     """Validator: the value (numpy scalars unwrapped) passes ``accepts``, else "expected ``expected``"."""
+
     def check(value: Any) -> Any:
         value = _plain(value)
         if value is not None and not accepts(value):  # None: for the optional fields' own check
-            raise custom_error(f"{expected.split()[-1]}_type", f"expected {expected}, got {_json_name(value)}")
+            raise custom_error("json_type", f"expected {expected}, got {_json_name(value)}")
         return value
 
     return BeforeValidator(check)
@@ -126,6 +136,7 @@ Real = Annotated[float, REAL]
 def integer_choice(*choices: int) -> BeforeValidator:
     """Validator of an integer ``Literal``: 2.0 or true is not 2 or 1."""
     return of_type(" or ".join(map(str, choices)), _is_integer)
+
 
 Integer = Annotated[int, INTEGER]
 Flag = Annotated[bool, FLAG]
