@@ -14,9 +14,10 @@ from .store import DURATION_BUCKETS, TERMINAL, JobStatus, JobStore
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 
 
-def render(store: JobStore, queue_info: dict[str, Any]) -> str:
-    counts = store.counts()
-    counters = store.counters()
+def render(store: JobStore, queue_info: dict[str, Any], owner: str | None = None, everyone: bool = True) -> str:
+    """The exposition; a tenant (not ``everyone``) gets its own jobs by status only: the counters,
+    the queue and the workers are the whole server's, and would tell of the other tenants."""
+    counts = store.counts(owner, everyone)
     out: list[str] = []
 
     def metric(name: str, kind: str, help_: str, samples: list[tuple[str, float]]) -> None:
@@ -24,8 +25,11 @@ def render(store: JobStore, queue_info: dict[str, Any]) -> str:
         out.append(f"# TYPE {name} {kind}")
         out.extend(f"{name}{labels} {_num(value)}" for labels, value in samples)
 
-    metric("voxelastic_jobs", "gauge", "Jobs in the job table by status.",
+    metric("voxelastic_jobs", "gauge", "Jobs in the job table by status" + ("." if everyone else " (this token's)."),
            [(f'{{status="{st.value}"}}', counts[st.value]) for st in JobStatus])
+    if not everyone:
+        return "\n".join(out) + "\n"
+    counters = store.counters()
     metric("voxelastic_queue_length", "gauge", "Jobs waiting for a worker.", [("", counts["queued"])])
     metric("voxelastic_jobs_submitted_total", "counter", "Jobs accepted by POST /jobs.",
            [("", counters.get("submitted", 0.0))])

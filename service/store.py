@@ -232,10 +232,14 @@ class JobStore:
             ).all()
             return [_snapshot(r) for r in rows], total
 
-    def counts(self) -> dict[str, int]:
-        """Number of jobs per status (every status present, zeros included)."""
+    def counts(self, owner: str | None = None, everyone: bool = True) -> dict[str, int]:
+        """Number of jobs per status (every status present, zeros included); only ``owner``'s
+        unless ``everyone``."""
+        stmt = select(JobRow.status, func.count()).group_by(JobRow.status)
+        if not everyone:
+            stmt = stmt.where(JobRow.owner == owner if owner is not None else JobRow.owner.is_(None))
         with Session(self.engine) as s:
-            found = dict(s.execute(select(JobRow.status, func.count()).group_by(JobRow.status)).all())
+            found = dict(s.execute(stmt).all())
         return {st.value: int(found.get(st.value, 0)) for st in JobStatus}
 
     def queued_count(self) -> int:

@@ -276,3 +276,27 @@ def test_the_next_link_is_relative_whatever_the_host_header(server):
     assert nxt.startswith("/jobs?") and "evil" not in nxt and "offset=1" in nxt and "limit=1" in nxt, nxt
     assert "status=succeeded" in nxt
     assert server.client.get(nxt).json()["offset"] == 1
+
+
+def _jobs_gauge(text: str) -> dict[str, int]:
+    return {line.split('"')[1]: int(line.rsplit(" ", 1)[1]) for line in text.splitlines()
+            if line.startswith("voxelastic_jobs{")}
+
+
+def test_metrics_show_a_tenant_only_its_own_jobs(server):
+    bob, admin = client(server, BOB), client(server, ADMIN)
+    before = _jobs_gauge(bob.get("/metrics").text)
+    theirs = bob.post("/jobs", data={"spec": json.dumps(cantilever(16))}, files={"mesh": ("c.stl", MESH)})
+    assert theirs.status_code == 202
+    server.wait(server.submit_ok(cantilever(16)))  # alice's: not bob's to count
+    deadline = time.monotonic() + 60
+    while bob.get(f"/jobs/{theirs.json()['id']}").json()["status"] != "succeeded" and time.monotonic() < deadline:
+        time.sleep(0.1)
+    mine = bob.get("/metrics").text
+    assert _jobs_gauge(mine)["succeeded"] == before["succeeded"] + 1
+    assert sum(_jobs_gauge(mine).values()) == bob.get("/jobs").json()["total"]
+    # the server-wide counters and gauges are the admin's
+    assert "voxelastic_jobs_submitted_total" not in mine and "voxelastic_queue_length" not in mine
+    everything = admin.get("/metrics").text
+    assert "voxelastic_jobs_submitted_total" in everything
+    assert sum(_jobs_gauge(everything).values()) == admin.get("/jobs").json()["total"] > bob.get("/jobs").json()["total"]

@@ -9,7 +9,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
 
 from ... import metrics
-from ..deps import QueueDep, StoreDep
+from ..deps import PrincipalDep, QueueDep, StoreDep
 from ..models import Health
 
 public = APIRouter(tags=["system"])
@@ -51,11 +51,11 @@ def health(request: Request, store: StoreDep, queue: QueueDep) -> JSONResponse:
     response_class=Response,
     responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format 0.0.4."},
                401: {"description": "Missing or invalid bearer token (when tokens are configured)."}},
-    summary="Prometheus metrics: jobs by status, durations, queue length",
+    summary="Prometheus metrics: jobs by status, durations, queue length (a tenant's token: its own jobs by status)",
 )
-def get_metrics(store: StoreDep, queue: QueueDep) -> Response:
+def get_metrics(store: StoreDep, queue: QueueDep, principal: PrincipalDep) -> Response:
     _, info = queue.health()
-    return Response(metrics.render(store, info), media_type=metrics.CONTENT_TYPE)
+    return Response(metrics.render(store, info, principal.owner, principal.everyone), media_type=metrics.CONTENT_TYPE)
 
 
 @router.get("/openapi.json", include_in_schema=False)
