@@ -300,3 +300,23 @@ def test_metrics_show_a_tenant_only_its_own_jobs(server):
     everything = admin.get("/metrics").text
     assert "voxelastic_jobs_submitted_total" in everything
     assert sum(_jobs_gauge(everything).values()) == admin.get("/jobs").json()["total"] > bob.get("/jobs").json()["total"]
+
+
+# --- item 11: a text part over the form's limit is named -----------------------------------------
+
+
+def test_a_spec_text_field_over_1_mib_is_413_naming_spec_and_the_way_around(server):
+    spec = cantilever(16)
+    spec["output"] = {"probes": [[0.5, 0.01, 0.01]] * 100_000}  # 1.8 MB
+    r = server.submit(spec)  # as a text field
+    assert r.status_code == 413, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "spec"] and err["type"] == "too_large", err
+    assert err["msg"].startswith("the form field 'spec' is over 1048576 bytes (1 MiB), the limit for a text field")
+    assert "file part" in err["msg"]
+    r = server.client.post("/jobs", data={"note": "x" * (2 << 20)}, files={"spec": ("job.json", json.dumps(spec))})
+    assert r.status_code == 413 and r.json()["detail"][0]["loc"] == ["body", "note"]
+    # the same spec as a file part is accepted
+    r = server.client.post("/jobs", files={"spec": ("job.json", json.dumps(spec)), "mesh": ("c.stl", MESH)})
+    assert r.status_code == 202, r.text[:300]
+    assert server.client.delete(f"/jobs/{r.json()['id']}").status_code in (200, 202, 204)

@@ -144,6 +144,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException):
+        too_large = _PART_TOO_LARGE.fullmatch(str(exc.detail)) if exc.status_code == 400 else None
+        if too_large:
+            return JSONResponse({"detail": [_part_too_large(exc, int(too_large.group(1)) * 1024)]}, status_code=413)
         if exc.status_code == 405:
             # Starlette's Allow names the methods of the first route that matched the path only
             # (GET of /jobs/{id}); a client must learn every method the path has (DELETE too)
@@ -168,6 +171,33 @@ def _add_head(router: APIRouter) -> None:
             router.add_api_route(route.path.removeprefix(router.prefix), route.endpoint, methods=["HEAD"],
                                  response_class=route.response_class, include_in_schema=False,
                                  name=f"{route.name}_head")
+
+
+# Starlette's words for a text (non-file) part of a multipart form over its 1 MiB limit
+_PART_TOO_LARGE = re.compile(r"Part exceeded maximum size of (\d+)KB\.")
+
+
+def _part_too_large(exc: Exception, limit: int) -> dict:
+    """The 413 entry for a text part over Starlette's limit, naming the part: its message names
+    neither the part nor that a file part has no such limit."""
+    name = _parsed_part_name(exc.__context__)
+    where = f"the form field '{name}'" if name else "a text field of the form"
+    msg = (f"{where} is over {limit} bytes ({limit / 2**20:g} MiB), the limit for a text field of a multipart "
+           "form; send it as a file part instead (curl -F 'spec=@job.json'; a spec may be up to "
+           "VOXELASTIC_MAX_SPEC_BYTES, the mesh is always a file part)")
+    return {"loc": ["body", name] if name else ["body"], "msg": msg, "type": "too_large"}
+
+
+def _parsed_part_name(exc: BaseException | None) -> str | None:
+    """The name of the part Starlette's multipart parser was reading when it raised ``exc`` (its
+    ``_current_part``, found in the traceback's frames); None when it cannot be told."""
+    tb = getattr(exc, "__traceback__", None)
+    while tb is not None:
+        part = getattr(tb.tb_frame.f_locals.get("self"), "_current_part", None)
+        if isinstance(getattr(part, "field_name", None), str):
+            return part.field_name[:64] or None
+        tb = tb.tb_next
+    return None
 
 
 def _plain(error: dict, body: object) -> dict:
