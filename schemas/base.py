@@ -105,7 +105,8 @@ def _json_name(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float, str)):
-        return repr(value)
+        text = repr(value)
+        return text if len(text) <= 40 else f"{text[:30]}... ({len(text)} characters)"
     return {list: "an array", tuple: "an array", dict: "an object"}.get(type(value), type(value).__name__)
 
 

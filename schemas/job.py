@@ -480,6 +480,12 @@ def parse_job(data: Mapping[str, Any] | str | bytes | bytearray) -> JobSpec:
             raise SpecError([reason]) from exc
         except _DuplicateKey as exc:
             raise SpecError([str(exc)]) from exc
+        except RecursionError as exc:
+            raise SpecError(["(json): the spec nests arrays or objects too deeply (nearly 1000 levels); a job spec "
+                             "needs fewer than 10"]) from exc
+        except ValueError as exc:  # Python's own limit: "Exceeds the limit (4300 digits) for integer string conversion"
+            raise SpecError(["(json): the spec holds an integer with more than 4300 digits" if "digits" in str(exc)
+                             else f"(json): {exc}"]) from exc
     if not isinstance(data, Mapping):
         raise SpecError([f"(root): expected a JSON object, got {_json_type(data)}"])
     try:

@@ -583,3 +583,17 @@ def test_facing_on_any_boundary_round_trips_and_names_bad_values() -> None:
         "boundaries.3.facing.direction: direction must be non-zero"]
     assert _errors(_edit(spec, "boundaries.3.facing.direction", [1, 0])) == [
         "boundaries.3.facing.direction: expected 3 components (dimension 3), got 2"]
+
+
+def test_json_that_python_refuses_to_read_is_a_spec_error() -> None:
+    # json.loads raises ValueError / RecursionError here; the CLI printed a traceback
+    with pytest.raises(SpecError) as info:
+        parse_job('{"dimension": 1' + "0" * 5000 + "}")
+    assert info.value.errors == ["(json): the spec holds an integer with more than 4300 digits"]
+    with pytest.raises(SpecError) as info:
+        parse_job("[" * 100_000 + "]" * 100_000)
+    assert info.value.errors[0].startswith("(json): the spec nests arrays or objects too deeply")
+    with pytest.raises(SpecError) as info:  # a long wrong value is shortened in the message
+        parse_job(_edit(MINIMAL, "grid", {"resolution": "1" * 5000}))
+    assert info.value.errors == ["grid.resolution: expected an integer, got '11111111111111111111111111111... "
+                                 "(5002 characters)"]
