@@ -110,17 +110,14 @@ def parse_spec(spec_text: str | bytes):
 _LOOP = re.compile(r"^polygon '[^']*': loop (\d+) ")
 
 
-def _engine_error(message: str, source: list | None = None, scale: float | None = None) -> dict[str, Any]:
+def _engine_error(message: str, source: list | None = None) -> dict[str, Any]:
     """An engine error message ('field.path: reason') as an error entry at that field.
 
     ``source``: where the geometry came from (``["body", "mesh"]``, or the spec's polygon), which
-    gets the messages that name no field; ``scale``: geometry.scale, blamed for out-of-range
-    coordinates only when it is not 1 (at 1 the input's own coordinates are out of range).
+    gets the messages that name no field.
     """
     source = source or ["body", "mesh"]
     path, reason = _split_path(message)
-    if path == ["geometry", "scale"] and scale == 1.0:
-        return _error(source, reason)
     if path[:2] == ["geometry", "mesh"] or not path:
         loop = _LOOP.match(message) if source[-1] == "polygon" else None
         return _error([*source, int(loop.group(1))] if loop else source, message)
@@ -173,7 +170,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
         raise Rejected(413, [_error(["body", "mesh"], f"{exc} (VOXELASTIC_MAX_INFLATED_BYTES)", "too_large")]) from None
     except VoxelasticError as exc:
         source = ["body", "mesh"] if uses_mesh else ["body", "spec", "geometry", "polygon"]
-        raise Rejected(422, [_engine_error(str(exc), source, spec.geometry.scale)]) from None
+        raise Rejected(422, [_engine_error(str(exc), source)]) from None
     except (MemoryError, RecursionError):
         raise
     except Exception:  # a loader crash on hostile bytes is still bad input, not a 500

@@ -50,8 +50,12 @@ def test_polygon_placement_and_errors():
         polygon_surface([square, [[0.5, 0.5], [2, 0.5], [2, 2], [0.5, 2]]])
     with pytest.raises(GeometryError, match="loop 0 is not a simple closed curve"):
         polygon_surface([[[0, 0], [2, 2], [2, 0], [0, 1]]])
-    with pytest.raises(GeometryError, match="loop 0 encloses no area"):
+    with pytest.raises(GeometryError, match=r"loop 0 encloses no area \(3 distinct points\)"):
         polygon_surface([[[0, 0], [1, 1], [2, 2]]])
+    with pytest.raises(GeometryError, match=r"loop 1 encloses no area \(1 distinct points\)"):
+        polygon_surface([square, [[0.5, 0.5]] * 5])
+    with pytest.raises(GeometryError, match=r"loop 0 is not a simple closed curve \(Self-intersection"):
+        polygon_surface([[[0, 0], [1, 1], [1, 0], [0, 1]]])  # a bowtie: its lobes' areas cancel
     with pytest.raises(GeometryError, match="loop 1 has 1 points with non-finite"):
         polygon_surface([square, [[0.2, 0.2], [0.4, np.nan], [0.3, 0.4]]])
 

@@ -127,7 +127,7 @@ def polygon_spec(*loops) -> dict:
 
 
 @pytest.mark.parametrize("loops, loc, words", [
-    ([[[0, 0], [1, 1], [1, 0], [0, 1]]], ["body", "spec", "geometry", "polygon", 0], "encloses no area"),  # a bowtie
+    ([[[0, 0], [1, 1], [1, 0], [0, 1]]], ["body", "spec", "geometry", "polygon", 0], "not a simple closed curve"),  # a bowtie
     ([[[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 0]] * 5], ["body", "spec", "geometry", "polygon", 1], "loop 1 encloses no area"),
     ([[[0, 0], [1e200, 0], [1e200, 1e200]]], ["body", "spec", "geometry", "polygon"], "reaches coordinates of 1e+200 m"),
 ])

@@ -48,14 +48,15 @@ def place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.nd
         points = points @ r.T + t
         mirrored = bool(np.linalg.det(r) < 0)
     # the message names the spec field (geometry.scale), so the service reports it there
+    # at scale 1 the input's own coordinates are out of range: the message names no spec field, so
+    # the service reports it at the mesh or polygon
+    blame = "" if scale == 1 else f"geometry.scale: scaled by {scale!r}, "
     if not np.isfinite(points).all():
-        raise GeometryError(f"geometry.scale: the coordinates of '{name}' overflow after scaling by {scale!r}")
+        raise GeometryError(f"{blame}the coordinates of '{name}' overflow")
     reach = float(np.abs(points).max()) if points.size else 0.0
     if reach > MAX_COORDINATE:
-        raise GeometryError(
-            f"geometry.scale: scaled by {scale!r}, '{name}' reaches coordinates of {reach:.3g} m;"
-            f" at most {MAX_COORDINATE:g} m is supported"
-        )
+        raise GeometryError(f"{blame}'{name}' reaches coordinates of {reach:.3g} m; at most {MAX_COORDINATE:g} m is "
+                            "supported")
     return points, mirrored
 
 

@@ -96,6 +96,7 @@ def _clean_loop(loop, i: int, name: str, warnings: list[str]) -> np.ndarray:
         raise GeometryError(
             f"polygon '{name}': loop {i} has {bad} points with non-finite coordinates (NaN or infinity)"
         )
+    distinct = len(np.unique(p, axis=0))
     repeat = np.all(p == np.roll(p, -1, axis=0), axis=1)
     if repeat.any() and len(p) > 1:
         # The closing copy of the first point is expected; other repeats are zero-length segments.
@@ -103,14 +104,19 @@ def _clean_loop(loop, i: int, name: str, warnings: list[str]) -> np.ndarray:
         if extra:
             warnings.append(f"loop {i}: removed {extra} repeated consecutive points")
         p = p[~repeat]
-    if len(p) < 3 or _signed_area(p) == 0.0:
-        raise GeometryError(f"polygon '{name}': loop {i} encloses no area ({len(p)} distinct points)")
+    flat = distinct < 3 or np.linalg.matrix_rank(p - p.mean(axis=0)) < 2
+    if not flat and _signed_area(p) == 0.0 and not shapely.Polygon(p).is_valid:  # a bowtie's lobes cancel
+        raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve "
+                            f"({shapely.is_valid_reason(shapely.Polygon(p))})")
+    if flat or _signed_area(p) == 0.0:
+        raise GeometryError(f"polygon '{name}': loop {i} encloses no area ({distinct} distinct points)")
     return p
 
 
 def _signed_area(loop: np.ndarray) -> float:
     x, y = loop[:, 0], loop[:, 1]
-    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    with np.errstate(over="ignore", invalid="ignore"):  # coordinates near 1e200: refused by range later
+        return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
 def _loop_depths(loops: list[np.ndarray], name: str) -> np.ndarray:
