@@ -84,11 +84,13 @@ def _check_room(path: str, shape, fields, *, levels: int = 1, vertices: int = 0,
 def _admit(spec, base_dir: Path):
     """Load the job's geometry and build its grid under the limits ``run`` applies; returns
     (surface, grid). Raises the engine's errors (GeometryError, GridError) with their messages."""
+    from .devices import check_arch
     from .errors import GeometryError
     from .grid import make_grid
     from .method import method_entry
     from .pipeline import Limits, load_geometry
 
+    check_arch(spec.solver.arch)
     limits = Limits()
     surface, _ = load_geometry(spec, base_dir=base_dir)
     if len(surface.faces) > limits.max_triangles:

@@ -15,7 +15,6 @@ per version of the engine's source.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import hashlib
 import io
 import linecache
@@ -31,6 +30,7 @@ from typing import Literal
 import numpy as np
 import gstaichi as ti  # engine/__init__.py has set its environment: no banner on stdout
 
+from .devices import check_arch, cuda_driver_present
 from .errors import BackendError
 from .geometry.cache import cache_root
 
@@ -74,9 +74,7 @@ def init(arch: Arch = "cpu", precision: Precision = "f64", cache_dir: str | Path
                 f"{_current.precision}; cannot switch to arch={arch}, precision={precision} in the same process"
             )
         return _current
-    if arch == "cuda" and not cuda_driver_present():  # Taichi would fall back to the CPU with a warning alone
-        raise BackendError("solver.arch: 'cuda' was asked for, but this machine has no CUDA driver; use 'auto' "
-                           "(CUDA where present, else the CPU) or 'cpu'")
+    check_arch(arch)  # Taichi would fall back to the CPU with a warning alone
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     # Kernels compute in f64 whatever the precision: geometry must stay exact, and "f32" only
@@ -233,15 +231,6 @@ def save_kernel_cache() -> None:
             os.waitpid(pid, 0)
             return
         time.sleep(0.002)
-
-
-def cuda_driver_present() -> bool:
-    """Whether the CUDA driver library loads (what Taichi's CUDA backend needs first)."""
-    try:
-        ctypes.CDLL("libcuda.so.1")
-    except OSError:
-        return False
-    return True
 
 
 def current() -> RuntimeInfo | None:

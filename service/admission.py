@@ -132,6 +132,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     """
     from engine.errors import VoxelasticError
     from engine.geometry.inflate import InflateLimitError
+    from engine.devices import check_arch
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.method import method_entry
@@ -140,6 +141,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     spec = parse_spec(spec_text)
     try:
         method_entry(spec.method.kind).check_dimension(spec.dimension)
+        check_arch(spec.solver.arch)
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
 

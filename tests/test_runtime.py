@@ -6,7 +6,7 @@ import textwrap
 
 import pytest
 
-from engine.runtime import cuda_driver_present as runtime_cuda_present
+from engine.devices import cuda_driver_present as runtime_cuda_present
 
 
 def run_py(code: str) -> subprocess.CompletedProcess:

@@ -320,3 +320,16 @@ def test_a_spec_text_field_over_1_mib_is_413_naming_spec_and_the_way_around(serv
     r = server.client.post("/jobs", files={"spec": ("job.json", json.dumps(spec)), "mesh": ("c.stl", MESH)})
     assert r.status_code == 202, r.text[:300]
     assert server.client.delete(f"/jobs/{r.json()['id']}").status_code in (200, 202, 204)
+
+
+def test_cuda_on_a_server_without_cuda_is_422_at_solver_arch(server):
+    from engine.devices import cuda_driver_present
+
+    if cuda_driver_present():
+        pytest.skip("this machine has a CUDA driver")
+    spec = cantilever(16)
+    spec["solver"] = {"arch": "cuda"}  # the worker started for it fell back to the CPU, then the job failed 'internal'
+    r = server.client.post("/jobs", files={"spec": ("job.json", json.dumps(spec).encode()), "mesh": ("c.stl", MESH)})
+    assert r.status_code == 422, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "spec", "solver", "arch"] and err["msg"].startswith("'cuda' was asked for")
