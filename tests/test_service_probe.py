@@ -333,3 +333,14 @@ def test_cuda_on_a_server_without_cuda_is_422_at_solver_arch(server):
     assert r.status_code == 422, r.text[:300]
     (err,) = r.json()["detail"]
     assert err["loc"] == ["body", "spec", "solver", "arch"] and err["msg"].startswith("'cuda' was asked for")
+
+
+def test_a_compressed_request_body_is_415_naming_content_encoding(server):
+    import gzip
+
+    body = gzip.compress(b"--x\r\nContent-Disposition: form-data; name=\"spec\"\r\n\r\n{}\r\n--x--\r\n")
+    r = server.client.post("/jobs", content=body, headers={"Content-Type": "multipart/form-data; boundary=x",
+                                                           "Content-Encoding": "gzip"})
+    assert r.status_code == 415, r.text[:300]
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["header", "content-encoding"] and "'gzip' is not read" in err["msg"]

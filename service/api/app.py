@@ -54,7 +54,17 @@ class UploadLimit:
         if scope["type"] != "http" or scope["method"] != "POST" or scope["path"].rstrip("/") != "/jobs":
             await self.app(scope, receive, send)
             return
-        declared = dict(scope["headers"]).get(b"content-length")
+        headers = dict(scope["headers"])
+        encoding = headers.get(b"content-encoding", b"identity").strip().lower()
+        if encoding != b"identity":  # a compressed body read as multipart is "Invalid multipart data"
+            body = JSONResponse({"detail": [{
+                "loc": ["header", "content-encoding"], "type": "unsupported_encoding",
+                "msg": f"a request body in content-encoding {encoding.decode('latin-1')!r} is not read: send it "
+                       "uncompressed (a compressed mesh file such as part.stl.gz is read as it is)"}]},
+                status_code=415)
+            await body(scope, receive, send)
+            return
+        declared = headers.get(b"content-length")
         if declared is not None and declared.isdigit() and int(declared) > self.limit:
             await self._refuse(send, int(declared))
             return
