@@ -344,3 +344,27 @@ def test_a_compressed_request_body_is_415_naming_content_encoding(server):
     assert r.status_code == 415, r.text[:300]
     (err,) = r.json()["detail"]
     assert err["loc"] == ["header", "content-encoding"] and "'gzip' is not read" in err["msg"]
+
+
+def test_a_list_page_of_big_specs_ends_early_and_its_next_link_goes_on(tmp_path_factory):
+    srv = Server(tmp_path_factory.mktemp("list") / "data", shared_cache_dir(tmp_path_factory), workers=1,
+                 max_spec_bytes=40_000)
+    srv.start()
+    try:
+        ids = []
+        for k in range(6):  # ~35 kB each: a page holds 4 x 40 kB of specs, so 4 of them
+            spec = cantilever(8)
+            z = float(f"0.01234{k}")  # every number 8 characters: each spec the same size
+            spec["output"] = {"fields": ["displacement"], "probes": [[0.5, 0.012345, z]] * 1500, "surface": False}
+            body = json.dumps(spec, separators=(",", ":")).encode()
+            assert 32_000 < len(body) < 40_000
+            r = srv.client.post("/jobs", files={"spec": ("job.json", body), "mesh": ("c.stl", MESH)})
+            assert r.status_code == 202, r.text[:300]
+            ids.append(r.json()["id"])
+        page = srv.client.get("/jobs?limit=200").json()
+        assert len(page["items"]) == 4 and page["total"] == 6 and page["next"] == "/jobs?offset=4&limit=200"
+        assert page["items"][0]["spec"]["output"]["probes"][-1] == [0.5, 0.012345, 0.012345]  # newest first, whole
+        rest = srv.client.get(page["next"]).json()
+        assert [j["id"] for j in page["items"] + rest["items"]] == ids[::-1] and rest["next"] is None
+    finally:
+        srv.close()

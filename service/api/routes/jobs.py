@@ -24,6 +24,7 @@ from ..models import JobOut, JobPage, job_json, job_out, output_surface
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
 HDF5_TYPE = "application/x-hdf5"
+LIST_SPECS = 4  # a list page holds at most this many largest specs' bytes of specs (at least one job)
 XDMF_TYPE = "application/xml"
 
 _ERRORS = {
@@ -115,19 +116,30 @@ def list_jobs(
     request: Request,
     store: StoreDep,
     principal: PrincipalDep,
+    settings: SettingsDep,
     limit: Annotated[int, Query(ge=1, le=200)] = 50,
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
     status_: Annotated[JobStatus | None, Query(alias="status")] = None,
-) -> JobPage:
+) -> Response:
     items, total = store.list(limit=limit, offset=offset, status=status_.value if status_ else None,
                               owner=principal.owner, everyone=principal.everyone)
+    # Each item carries its spec (up to max_spec_bytes): a page of 200 big ones would be 800 MB
+    # built in the API's memory, so a page ends early past LIST_SPECS specs' worth and `next` goes on
+    kept, size = [], 0
+    for job in items:
+        size += len(job.spec or "")
+        if kept and size > LIST_SPECS * settings.max_spec_bytes:
+            break
+        kept.append(job)
     nxt = None
-    if offset + len(items) < total:
+    if offset + len(kept) < total:
         # path and query only: the Host header is the client's to choose, so an absolute link built
         # from it could point anywhere (Host: evil.example)
-        url = request.url.include_query_params(offset=offset + limit, limit=limit)
+        url = request.url.include_query_params(offset=offset + len(kept), limit=limit)
         nxt = f"{url.path}?{url.query}"
-    return JobPage(items=[job_out(j) for j in items], total=total, limit=limit, offset=offset, next=nxt)
+    # the stored specs are spliced in as they are (job_json), not parsed and encoded again
+    rest = JobPage(items=[], total=total, limit=limit, offset=offset, next=nxt).model_dump_json(exclude={"items"})
+    return Response(f'{{"items":[{",".join(job_json(j) for j in kept)}],{rest[1:]}', media_type="application/json")
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=_ERRORS, summary="Status, progress, timings, result links")
