@@ -27,6 +27,24 @@ from .regions import Region, _subdivide, make_region
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
+
+def evaluate(function: PointFunction, points: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """A Python-API function at points [N, d] as floats [N, *shape] (a constant [*shape] is
+    broadcast); BoundaryError naming ``what`` when it raises or returns another shape."""
+    n = len(points)
+    try:
+        value = np.asarray(function(points), dtype=float)
+    except Exception as exc:  # the user's code: say whose, keep the cause
+        raise BoundaryError(f"{what}: the function raised {type(exc).__name__}: {exc}") from exc
+    if value.shape == shape:
+        value = np.broadcast_to(value, (n, *shape))
+    if value.shape != (n, *shape):
+        wanted = f"[{', '.join(map(str, (n, *shape)))}]"
+        constant = f"[{', '.join(map(str, shape))}]" if shape else "one value"
+        raise BoundaryError(f"{what}: the function returned shape {list(value.shape)} for {n} points; expected "
+                            f"{wanted} (or {constant} for a constant)")
+    return value
+
 # A displacement patch covering more than this share of a body's surface gets a warning: usually a
 # half-space whose normal points the wrong way (the normal points out of the region).
 WIDE_HOLD = 0.5
@@ -54,7 +72,7 @@ class Prescribed:
         naming the boundary when it is not finite."""
         n, d = points.shape
         if callable(self.value):
-            g = np.asarray(self.value(points), dtype=float).reshape(n, d)
+            g = evaluate(self.value, points, (d,), f"{self.name}: the displacement")
         else:
             g = np.broadcast_to(np.array([0.0 if v is None else float(v) for v in self.value]), (n, d))
         if not np.all(np.isfinite(g)):
@@ -95,11 +113,11 @@ class PredicateRegion:
     """A region given by a callable mask points [N, d] -> bool [N] (Python API). Surface facets
     count by their centroid, so patches are resolved to the facet size."""
 
-    def __init__(self, mask: PointFunction) -> None:
-        self.mask = mask
+    def __init__(self, mask: PointFunction, name: str = "region") -> None:
+        self.mask, self.name = mask, name
 
     def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
-        return np.asarray(self.mask(np.asarray(points, dtype=float)), dtype=bool).reshape(len(points))
+        return evaluate(self.mask, np.asarray(points, dtype=float), (), f"{self.name}: the region") != 0
 
     def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         keep = np.nonzero(self.contains(np.asarray(facets).mean(axis=1)))[0]
@@ -137,9 +155,10 @@ def make_boundaries(spec, functions, material) -> Boundaries:
     density for gravity."""
     d = spec.dimension
     out = Boundaries()
+    _check_function_names(spec, functions)
     for i, b in enumerate(spec.boundaries):
         name = b.name or f"boundaries.{i}"
-        region = PredicateRegion(functions.regions[name]) if name in functions.regions else make_region(b.region, d)
+        region = PredicateRegion(functions.regions[name], name) if name in functions.regions else make_region(b.region, d)
         if getattr(b, "facing", None) is not None:
             region = Facing(region, np.asarray(b.facing.direction, dtype=float), float(b.facing.max_angle_deg))
         if b.kind == "displacement":
@@ -157,6 +176,20 @@ def make_boundaries(spec, functions, material) -> Boundaries:
     if out.body_force is None and spec.loads.gravity is not None and any(g != 0 for g in spec.loads.gravity):
         out.body_force = material.density * np.asarray(spec.loads.gravity, dtype=float)
     return out
+
+
+def _check_function_names(spec, functions) -> None:
+    """BoundaryError for a Python-API function keyed by a name that is no boundary of its kind in
+    ``spec`` (it would be ignored: a typo's function never runs)."""
+    kinds = {b.name or f"boundaries.{i}": b.kind for i, b in enumerate(spec.boundaries)}
+    for group, allowed in (("displacement", ("displacement",)), ("traction", ("traction",)),
+                           ("stress", ("traction",)), ("regions", ("displacement", "traction", "pressure"))):
+        for key in getattr(functions, group):
+            if kinds.get(key) not in allowed:
+                have = [n for n, k in kinds.items() if k in allowed]
+                raise BoundaryError(f"functions.{group}: {key!r} names no {' or '.join(allowed)} boundary of the spec "
+                                    f"(those are: {', '.join(map(repr, have)) or 'none'}); name a boundary by its "
+                                    "`name`, or boundaries.<i> when it has none")
 
 
 def select_patch(region, facets: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -334,14 +367,20 @@ def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=No
     if pressure is not None:
         t = -float(pressure) * normals
     elif stress is not None:
-        sigma = np.asarray(stress(points) if callable(stress) else stress, dtype=float)
-        sigma = np.broadcast_to(sigma, (q, d, d)) if sigma.shape == (d, d) else sigma
+        if callable(stress):
+            sigma = evaluate(stress, points, (d, d), f"{name}: the stress")
+        else:
+            sigma = np.asarray(stress, dtype=float)
+            sigma = np.broadcast_to(sigma, (q, d, d)) if sigma.shape == (d, d) else sigma
         if sigma.shape != (q, d, d):
             raise ValueError(f"{name}.stress: expected [{d}, {d}] or [{q}, {d}, {d}], got {sigma.shape}")
         t = np.einsum("qij,qj->qi", sigma, normals)
     else:
-        t = np.asarray(traction(points) if callable(traction) else traction, dtype=float)
-        t = np.broadcast_to(t, (q, d)) if t.shape == (d,) else t
+        if callable(traction):
+            t = evaluate(traction, points, (d,), f"{name}: the traction")
+        else:
+            t = np.asarray(traction, dtype=float)
+            t = np.broadcast_to(t, (q, d)) if t.shape == (d,) else t
         if t.shape != (q, d):
             raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
     if not np.all(np.isfinite(t)):

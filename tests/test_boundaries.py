@@ -158,6 +158,28 @@ def test_a_facing_that_keeps_nothing_says_which_way_the_surface_in_its_region_fa
         simulate(bar_job({"kind": "staggered"}, 0.5, [backwards]), bar_stl(), filename="bar.stl")
 
 
+def test_python_api_functions_that_fail_are_errors_naming_the_boundary():
+    job = bar_job({"kind": "staggered"}, 0.5, [CLAMP], gravity=(0, 0, 0))
+    job["boundaries"].append({"kind": "traction", "name": "tip", "region": {"box": [[9.9, -2, -2], [11, 2, 2]]},
+                              "value": [0, 0, -1]})
+    cases = [
+        (Functions(displacement={"clamp": lambda x: 1 / 0}),
+         r"clamp: the displacement: the function raised ZeroDivisionError: division by zero"),
+        (Functions(displacement={"clamp": lambda x: np.zeros(len(x))}),
+         r"clamp: the displacement: the function returned shape \[\d+\] for \d+ points; expected \[\d+, 3\]"),
+        (Functions(traction={"tip": lambda x: np.zeros((len(x), 2))}), r"tip: the traction: the function returned"),
+        (Functions(regions={"clamp": lambda x: np.zeros((len(x), 3))}),
+         r"clamp: the region: the function returned shape \[\d+, 3\] for \d+ points; expected \[\d+\] \(or one value"),
+        (Functions(body_force=lambda x: np.zeros(len(x))), r"loads: the body force: the function returned"),
+        (Functions(displacement={"clamp2": lambda x: 0 * x}),  # a typo: the function would never run
+         r"functions.displacement: 'clamp2' names no displacement boundary of the spec \(those are: 'clamp'\)"),
+        (Functions(traction={"clamp": lambda x: 0 * x}), r"functions.traction: 'clamp' names no traction boundary"),
+    ]
+    for functions, message in cases:
+        with pytest.raises(BoundaryError, match=message):
+            simulate(job, bar_stl(), filename="bar.stl", functions=functions)
+
+
 def test_a_hold_over_most_of_the_surface_is_a_warning_that_names_the_half_space_rule():
     # the user meant x <= 0.1 but gave the normal that holds x >= 0.1: nearly the whole bar
     wrong = {**CLAMP, "region": {"halfspace": {"point": [0.1, 0, 0], "normal": [-1, 0, 0]}}}

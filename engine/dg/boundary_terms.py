@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..boundary import select_patch
+from ..boundary import evaluate, select_patch
 from ..errors import BoundaryError
 from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions
 from .integrals import projected_load, surface_points
@@ -47,7 +47,7 @@ class BoundaryTerms:
         if self.body_force is not None:
             if callable(self.body_force):
                 rule = self.volume_rule()
-                b = np.asarray(self.body_force(rule.points), dtype=float).reshape(-1, 3)
+                b = evaluate(self.body_force, rule.points, (3,), "loads: the body force")
                 f += basis.tested(el.count, rule.element, rule.xi, rule.weights[:, None] * b)
             else:
                 g = np.asarray(self.body_force, dtype=float).reshape(3)

@@ -20,7 +20,7 @@ from dataclasses import InitVar, dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import Prescribed, SurfaceLoad, check_holds, facet_measures, patch_quadrature, tractions
+from ..boundary import Prescribed, SurfaceLoad, check_holds, evaluate, facet_measures, patch_quadrature, tractions
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
@@ -179,7 +179,7 @@ class StaggeredElasticity(StaggeredFields):
         if self.body_force is not None:
             pts, a, p = points, self.dof_comp, self.dof_pos
             if callable(self.body_force):
-                b = np.asarray(self.body_force(pts), dtype=float).reshape(-1, d)[np.arange(len(pts)), a]
+                b = evaluate(self.body_force, pts, (d,), "loads: the body force")[np.arange(len(pts)), a]
                 f[a, p] += grid.spacing**d * level.vf_host[a, p] * b
             else:
                 # a constant force: whole rows at once (face fractions vanish off the active DOFs)
