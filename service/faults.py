@@ -59,11 +59,6 @@ def describe(exc: OSError, what: str) -> str:
     return f"{what} could not be written: {cause}" + (f" (errno {name})" if name else "")
 
 
-def free_bytes(path: str | Path) -> int:
-    """Free space for an unprivileged writer on the file system holding ``path``."""
-    return shutil.disk_usage(path).free
-
-
 def _storage_cause(exc: BaseException) -> OSError | None:
     seen: set[int] = set()
     cur: BaseException | None = exc
