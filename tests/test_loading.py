@@ -336,3 +336,14 @@ def test_gltf_path_resolves_its_buffer_file(tmp_path):
 def test_trimesh_objects_are_accepted():
     surface = load_surface(_sphere(2.0))
     assert surface.closed and surface.enclosed_volume() == pytest.approx(_sphere(2.0).volume, rel=1e-14)
+
+
+def test_two_bodies_touching_along_a_face_load_as_one_solid_and_the_warning_says_so():
+    # the shared face is triangulated differently on each side, so its triangles do not cancel in pairs
+    a = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    b = trimesh.creation.box(bounds=[[1, 0, 0], [2, 1, 1]])
+    s = load_surface(trimesh.util.concatenate([a, b]).export(file_type="stl"), filename="pair.stl")
+    assert s.closed and s.enclosed_volume() == pytest.approx(2.0, rel=1e-14)
+    (warning,) = s.warnings
+    assert "(open on its own: bodies touching along shared faces)" in warning
+    assert "bodies that only touch are solved as one solid" in warning

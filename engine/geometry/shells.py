@@ -63,6 +63,7 @@ from scipy.sparse.csgraph import connected_components
 
 from engine.errors import GeometryError
 from engine.geometry.surface import Surface
+from engine.geometry.topology import edge_balance
 from engine.geometry.winding import winding_number
 
 # Intersection volumes below this fraction of the smaller shell's volume are round-off or a
@@ -113,8 +114,9 @@ def unite_overlapping_shells(surface: Surface, shell: np.ndarray) -> Surface:
     if solids.rejected:
         reasons = ", ".join(sorted(set(solids.rejected.values())))
         surface.warnings.append(
-            f"could not check {len(solids.rejected)} shells for overlaps with their neighbours"
-            f" (manifold3d: {reasons}); where they overlap others, the overlap counts twice"
+            f"could not check {len(solids.rejected)} surface pieces for overlaps with their neighbours"
+            f" ({reasons}); where they overlap others, the overlap counts twice (bodies that only touch are "
+            "solved as one solid)"
         )
     if not rebuilt.any():
         return surface
@@ -220,7 +222,10 @@ class _Shells:
                 tri_verts=np.ascontiguousarray(local, dtype=np.uint64),
             ))
             if solid.status() != manifold3d.Error.NoError:
-                self.rejected[s] = solid.status().name
+                # a piece open on its own is part of bodies that share faces or edges (two boxes
+                # touching along a face, triangulated differently on each side)
+                alone = edge_balance(local, len(used))[2].any()
+                self.rejected[s] = "open on its own: bodies touching along shared faces" if alone else solid.status().name
             self._solid[s] = solid
         return None if s in self.rejected else self._solid[s]
 
