@@ -33,7 +33,10 @@ def evaluate(function: PointFunction, points: np.ndarray, shape: tuple[int, ...]
     broadcast); BoundaryError naming ``what`` when it raises or returns another shape."""
     n = len(points)
     try:
-        value = np.asarray(function(points), dtype=float)
+        raw = np.asarray(function(points))
+        if np.iscomplexobj(raw):  # float() would drop the imaginary part with a warning alone
+            raise TypeError("it returned complex numbers")
+        value = np.asarray(raw, dtype=float)
     except Exception as exc:  # the user's code: say whose, keep the cause
         raise BoundaryError(f"{what}: the function raised {type(exc).__name__}: {exc}") from exc
     if value.shape == shape:
@@ -117,7 +120,10 @@ class PredicateRegion:
         self.mask, self.name = mask, name
 
     def contains(self, points: np.ndarray, slack: float = 0.0) -> np.ndarray:
-        return evaluate(self.mask, np.asarray(points, dtype=float), (), f"{self.name}: the region") != 0
+        inside = evaluate(self.mask, np.asarray(points, dtype=float), (), f"{self.name}: the region")
+        if not np.all(np.isfinite(inside)):  # NaN != 0 would count as inside
+            raise BoundaryError(f"{self.name}: the region's function returned NaN or infinity")
+        return inside != 0
 
     def clip(self, facets: np.ndarray, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         keep = np.nonzero(self.contains(np.asarray(facets).mean(axis=1)))[0]
@@ -384,7 +390,7 @@ def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=No
         if t.shape != (q, d):
             raise ValueError(f"{name}.traction: expected [{d}] or [{q}, {d}], got {t.shape}")
     if not np.all(np.isfinite(t)):
-        raise ValueError(f"{name}: the traction is not finite at some surface points")
+        raise BoundaryError(f"{name}: the traction is not finite at some surface points")
     return np.array(t)
 
 

@@ -289,7 +289,12 @@ def cmd_run(args) -> int:
 
     for place, peak in peaks(result).items():
         at = ", ".join(f"{v:.4g}" for v in peak.location)
-        when = "" if peak.time is None else f" at t = {peak.time:.4g} s"
+        if peak.time is None:
+            when = ""
+        elif spec.analysis.kind == "quasistatic":  # its steps' "time" is the load factor k / n
+            when = f" at load factor {peak.time:.4g}"
+        else:
+            when = f" at t = {peak.time:.4g} s"
         print(f"peak von Mises {peak.value:.4g} Pa in the {place} at ({at}) m{when}", file=sys.stderr)
     print(f"{path}")
     return 0

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,7 +20,7 @@ import numpy as np
 
 from schemas import JobSpec, parse_job
 
-from .errors import GeometryError, GridError
+from .errors import BoundaryError, GeometryError, GridError
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.fractions import VolumeFractions, volume_fractions
 from .geometry.loading import load_surface
@@ -223,6 +223,15 @@ class Functions:
     stress_form: str = "divergence"
     pressure_form: str = "divergence"  # how a pressure becomes loads (sigma = -p I in the divergence form)
 
+    def __post_init__(self) -> None:
+        for name in ("stress_form", "pressure_form"):  # anything else used to mean "quadrature" silently
+            if getattr(self, name) not in ("divergence", "quadrature"):
+                raise BoundaryError(f"functions.{name}: 'divergence' or 'quadrature', got {getattr(self, name)!r}")
+        for name in ("displacement", "traction", "stress", "regions"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise BoundaryError(f"functions.{name}: a dict of boundary name -> function, got "
+                                    f"{type(getattr(self, name)).__name__}")
+
 
 def run(
     spec: JobSpec | dict | str | bytes,
@@ -251,6 +260,8 @@ def run(
     def setup(part: str, share: float) -> None:
         progress("discretization", 0.32 + 0.08 * min(max(share, 0.0), 1.0), {"part": part})
 
+    if functions is not None and not isinstance(functions, Functions):
+        raise BoundaryError(f"functions: an engine.pipeline.Functions, got {type(functions).__name__}")
     method = _discretize(spec, geo, functions or Functions(), setup)
     times["discretization"] = time.perf_counter() - t
     # The method keeps what it needs of the geometry; the result takes the cell fractions now and

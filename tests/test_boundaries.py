@@ -178,6 +178,32 @@ def test_python_api_functions_that_fail_are_errors_naming_the_boundary():
     for functions, message in cases:
         with pytest.raises(BoundaryError, match=message):
             simulate(job, bar_stl(), filename="bar.stl", functions=functions)
+    # DG read a transposed [3, N] displacement as [N, 3] and solved it (a silently wrong answer)
+    with pytest.raises(BoundaryError, match=r"clamp: the displacement: the function returned shape \[3, \d+\]"):
+        simulate({**job, "method": {"kind": "dg", "degree": 1}}, bar_stl(), filename="bar.stl",
+                 functions=Functions(displacement={"clamp": lambda x: np.zeros((3, len(x)))}))
+    for functions, message in [
+        (Functions(regions={"clamp": lambda x: np.full(len(x), np.nan)}), r"clamp: the region's function returned NaN"),
+        (Functions(traction={"tip": lambda x: np.full(x.shape, np.inf)}), r"tip: the traction is not finite"),
+        (Functions(traction={"tip": lambda x: (1 + 1j) * x}), r"tip: the traction: the function raised TypeError: it "
+                                                               r"returned complex numbers"),
+    ]:
+        with pytest.raises(BoundaryError, match=message):
+            simulate(job, bar_stl(), filename="bar.stl", functions=functions)
+    with pytest.raises(BoundaryError, match=r"functions.stress_form: 'divergence' or 'quadrature', got 'Divergence'"):
+        Functions(stress_form="Divergence")  # it used to mean "quadrature"
+    with pytest.raises(BoundaryError, match=r"functions: an engine.pipeline.Functions, got dict"):
+        simulate(job, bar_stl(), filename="bar.stl", functions={"displacement": {}})
+
+
+def test_a_constant_stress_in_the_divergence_form_loads_the_free_bar_exactly():
+    sigma = np.array([[2.0, 0.5, 0.0], [0.5, -1.0, 0.0], [0.0, 0.0, 0.0]]) * 1e6  # it raised IndexError
+    job = bar_job({"kind": "staggered"}, 0.5, [{"kind": "traction", "name": "all", "region": {"all": True},
+                                                 "value": [0, 0, 0]}], gravity=(0, 0, 0), probes=[[5.0, 0.1, 0.2]])
+    job["output"]["fields"] = ["displacement", "stress"]
+    r = simulate(job, bar_stl(), filename="bar.stl", functions=Functions(stress={"all": lambda x: sigma}))
+    voigt = r.fields.probes["stress"][0]  # xx, yy, zz, yz, xz, xy
+    np.testing.assert_allclose(voigt, [2e6, -1e6, 0, 0, 0, 0.5e6], atol=1e-6 * 2e6)
 
 
 def test_a_hold_over_most_of_the_surface_is_a_warning_that_names_the_half_space_rule():

@@ -84,12 +84,7 @@ class BoundaryTerms:
             on = P["boundary"][patch] == k
             if not np.any(on):
                 continue
-            if callable(bc.value):
-                g[on] = np.asarray(bc.value(sp_.points[on]), dtype=float).reshape(-1, 3)
-            else:
-                g[on] = np.array([0.0 if v is None else float(v) for v in bc.value])
-        if not np.all(np.isfinite(g)):
-            raise BoundaryError("boundaries: a prescribed displacement is not finite at some surface points")
+            g[on] = bc.values(sp_.points[on])  # shape and finiteness checked, naming the boundary
         g = value_scale * g * mask
         gc = g
         if rotations is not None:

@@ -218,8 +218,9 @@ class StaggeredElasticity(StaggeredFields):
         level, grid, d, h = self.level, self.grid, self.dim, self.grid.spacing
         if load.pressure is not None:
             stress_field = lambda x: np.broadcast_to(-float(load.pressure) * np.eye(d), (len(x), d, d))  # noqa: E731
-        elif callable(load.stress):
-            stress_field = load.stress
+        elif load.stress is not None:  # a callable, or a constant [d, d] (broadcast by ``evaluate``)
+            given = load.stress if callable(load.stress) else (lambda x, s=np.asarray(load.stress, dtype=float): s)
+            stress_field = lambda x: evaluate(given, x, (d, d), f"{load.name}: the stress")  # noqa: E731
         else:
             raise BoundaryError(f"{load.name}: the divergence form needs a pressure or a stress field (a callable)")
         lay = level.layout
