@@ -39,6 +39,7 @@ from .base import (
     integer_choice,
     not_null,
     quoted,
+    raise_at,
     tag_dispatch,
 )
 from .regions import Facing, Region
@@ -331,7 +332,7 @@ class SolverSpec(SpecModel):
     arch: Literal["cpu", "cuda", "auto"] = Field("auto", description="Taichi backend; auto = CUDA if present.")
 
 
-FieldName = Literal["displacement", "strain", "stress", "von_mises", "pressure"]
+FieldName = Literal["displacement", "velocity", "strain", "stress", "von_mises", "pressure"]
 
 
 class OutputSpec(SpecModel):
@@ -384,6 +385,14 @@ class JobSpec(SpecModel):
         # An invalid dimension is reported by its field; nothing is compared with it.
         with dimension_scope(_declared_dimension(cls, data)):
             return handler(data)
+
+    @model_validator(mode="after")
+    def _velocity_is_dynamic(self) -> JobSpec:
+        if "velocity" in self.output.fields and self.analysis.kind != "dynamic":
+            i = self.output.fields.index("velocity")
+            raise_at("JobSpec", [(("output", "fields", i), "velocity_static", "'velocity' needs analysis.kind "
+                                  f"'dynamic' (a {self.analysis.kind} state has none)", "velocity")])
+        return self
 
     @model_validator(mode="after")
     def _zero_gravity(self) -> JobSpec:

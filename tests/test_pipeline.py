@@ -10,7 +10,7 @@ from engine.errors import GeometryError, GridError, MethodUnavailableError
 from engine.geometry.cache import GeometryCache
 from engine.grid import make_grid
 from engine.pipeline import Limits, prepare_geometry, run
-from schemas import parse_job
+from schemas import SpecError, parse_job
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -124,3 +124,22 @@ def test_dg_memory_is_checked_again_with_the_pieces_after_slicing():
     with pytest.raises(GridError, match=r"GiB for method 'dg', over the limit"):
         prepare_geometry(spec, data, filename="plates.stl", cache=GeometryCache(None),
                          limits=Limits(max_memory_bytes=(low + high) // 2))
+
+
+@pytest.mark.parametrize("method", [{"kind": "staggered"}, {"kind": "dg", "degree": 1}])
+def test_velocity_is_a_field_of_dynamic_runs_only(method, tmp_path):
+    """The result format lists `velocity` (m/s); the spec refused to ask for it. It is the backward-Euler
+    velocity (u_n - u_{n-1}) / dt of every step, and a static job asking for it is refused."""
+    spec = json.loads((ROOT / "examples" / "cantilever.json").read_text())
+    spec.update(grid={"resolution": 8, "padding": 1}, method=method, analysis={"kind": "dynamic", "time_step": 0.01, "steps": 3})
+    spec["output"] = {"fields": ["displacement", "velocity"], "probes": [[1.0, 0.0, 0.0]], "surface": False}
+    r = run(spec, (ROOT / "examples" / "cantilever.stl").read_bytes(), filename="cantilever.stl",
+            cache=GeometryCache(None))
+    u = [s.probes["displacement"] for s in r.steps]
+    v = [s.probes["velocity"] for s in r.steps]
+    np.testing.assert_allclose(v[0], u[0] / 0.01, rtol=1e-12)
+    np.testing.assert_allclose(v[2], (u[2] - u[1]) / 0.01, rtol=1e-9, atol=1e-12)
+    assert r.fields.cells["velocity"].shape == r.fields.cells["displacement"].shape and abs(v[2][0, 2]) > 0
+    spec.update(analysis={"kind": "static"})
+    with pytest.raises(SpecError, match=r"output.fields.1: 'velocity' needs analysis.kind 'dynamic'"):
+        parse_job(spec)

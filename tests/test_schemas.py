@@ -375,7 +375,7 @@ BAD = [
     ("short probe", "output.probes", [[0.7, 0, 0], [1, 2]], "output.probes.1", "expected 3 components"),
     ("duplicate field", "output.fields", ["stress", "von_mises", "stress"], "output.fields",
      "duplicate entries 'stress'"),
-    ("unknown field", "output.fields", ["temperature"], "output.fields.0", "'displacement', 'strain', 'stress'"),
+    ("unknown field", "output.fields", ["temperature"], "output.fields.0", "'displacement', 'velocity', 'strain', 'stress'"),
     ("polygon in 3D", "geometry", {"polygon": SQUARE_WITH_HOLE}, "geometry.polygon",
      "requires dimension 2, got dimension 3"),
     # In 3D the polygon is wrong whatever else the geometry says; "got both" is tested in 2D.
