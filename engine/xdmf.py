@@ -191,7 +191,8 @@ def write_view_datasets(f: h5py.File, result) -> None:
         if surface is None:
             continue
         sg = lg.require_group("surface")
-        for name in sorted(set(level.surface) | ({"von_mises"} & set(level.cells))):
+        # von Mises and velocity are not surface outputs of the methods: interpolated from the cells
+        for name in sorted(set(level.surface) | ({"von_mises", "velocity"} & set(level.cells))):
             values = refined_values(surface, result.surface_faces, level.surface.get(name), result.grid,
                                     level.cells.get(name), vf, result.surface_vertices)
             if values is not None:

@@ -3,12 +3,14 @@
 import json
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
 from engine.errors import GeometryError, GridError, MethodUnavailableError
 from engine.geometry.cache import GeometryCache
 from engine.grid import make_grid
+from engine.output import write_result
 from engine.pipeline import Limits, prepare_geometry, run
 from schemas import SpecError, parse_job
 
@@ -132,7 +134,7 @@ def test_velocity_is_a_field_of_dynamic_runs_only(method, tmp_path):
     velocity (u_n - u_{n-1}) / dt of every step, and a static job asking for it is refused."""
     spec = json.loads((ROOT / "examples" / "cantilever.json").read_text())
     spec.update(grid={"resolution": 8, "padding": 1}, method=method, analysis={"kind": "dynamic", "time_step": 0.01, "steps": 3})
-    spec["output"] = {"fields": ["displacement", "velocity"], "probes": [[1.0, 0.0, 0.0]], "surface": False}
+    spec["output"] = {"fields": ["displacement", "velocity"], "probes": [[1.0, 0.0, 0.0]], "surface": True}
     r = run(spec, (ROOT / "examples" / "cantilever.stl").read_bytes(), filename="cantilever.stl",
             cache=GeometryCache(None))
     u = [s.probes["displacement"] for s in r.steps]
@@ -140,6 +142,10 @@ def test_velocity_is_a_field_of_dynamic_runs_only(method, tmp_path):
     np.testing.assert_allclose(v[0], u[0] / 0.01, rtol=1e-12)
     np.testing.assert_allclose(v[2], (u[2] - u[1]) / 0.01, rtol=1e-9, atol=1e-12)
     assert r.fields.cells["velocity"].shape == r.fields.cells["displacement"].shape and abs(v[2][0, 2]) > 0
+    # the viewer files carry it at the corners and on the surface, as docs/result-format.md says
+    with h5py.File(write_result(r, tmp_path / "v.h5"), "r") as f:
+        for part in ("nodes", "surface"):
+            assert f[f"xdmf/levels/0002/{part}/velocity"].attrs["units"] == "m/s"
     spec.update(analysis={"kind": "static"})
     with pytest.raises(SpecError, match=r"output.fields.1: 'velocity' needs analysis.kind 'dynamic'"):
         parse_job(spec)
