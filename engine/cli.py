@@ -104,6 +104,20 @@ def _admit(spec, base_dir: Path):
     return surface, grid
 
 
+def _boundary_checks(spec, surface) -> list[str]:
+    """What run refuses about the boundaries, found without a solve: a region that holds no surface,
+    two holds that disagree on a common patch; returns the holds' warnings."""
+    from .boundary import check_holds, make_boundaries, select_patch
+    from .material import Material
+    from .pipeline import Functions
+
+    b = make_boundaries(spec, Functions(), Material.from_spec(spec.material))
+    facets = surface.vertices[surface.faces]
+    for bc in [*b.prescribed, *b.loads]:
+        select_patch(bc.region, facets, bc.name)
+    return check_holds(b.prescribed, surface)
+
+
 def _check_memory(grid, entry, method_spec, limits, surface) -> None:
     from .errors import GridError
 
@@ -188,8 +202,11 @@ def cmd_validate(args) -> int:
         return _error(spec)
     try:  # what run checks before any work: the mesh, its facets, the grid and its memory estimate
         surface, grid = _admit(spec, Path(args.job).resolve().parent)
+        notes = _boundary_checks(spec, surface)
     except VoxelasticError as exc:
         return _error(str(exc))
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr)
     print(f"OK: {args.job} ({spec.dimension}D, method {spec.method.kind}, analysis {spec.analysis.kind}, "
           f"{len(surface.faces)} facets, grid {'x'.join(map(str, grid.shape))})")
     return 0

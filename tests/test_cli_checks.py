@@ -69,6 +69,17 @@ def test_validate_checks_what_run_checks_and_says_ok_otherwise(tmp_path):
     assert "geometry.mesh: cannot read" in one_error_line(cli("validate", tmp_path / "job.json"))
 
 
+def test_validate_refuses_the_boundaries_run_would_refuse(tmp_path):
+    spec = json.loads(EXAMPLE.read_text())
+    clamp = spec["boundaries"][0]
+    pull = {**clamp, "name": "pull", "value": [0.001, None, None]}  # the clamp's own patch, another u_x
+    far = {**clamp, "name": "far", "region": {"box": [[5, 5, 5], [6, 6, 6]]}}
+    for extra, reason in ((pull, "clamp and pull: both prescribe u_x on the same"),
+                          (far, "far: the region holds no part of the mesh surface")):
+        line = one_error_line(cli("validate", job(tmp_path, boundaries=[*spec["boundaries"], extra])))
+        assert reason in line, line
+
+
 @pytest.mark.parametrize("where", ["missing-dir", "directory", "proc"])
 def test_an_unwritable_output_is_found_before_any_work(tmp_path, where):
     target = {"missing-dir": tmp_path / "no" / "such" / "out.h5", "directory": tmp_path,
