@@ -51,40 +51,47 @@ def test_a_spec_over_the_cap_is_413_naming_spec(server):
 
 def test_status_polls_and_event_streams_do_not_read_the_spec(server):
     job_id = server.submit_ok(long_job(400))
-    server.wait_running(job_id, stage=None)
-    shown = server.job(job_id)["spec"]
-    assert shown["grid"]["resolution"] == 64
-    # a stored spec of 30 MB (an older server had no cap): status polls of streams must not read it
-    huge = json.dumps({**shown, "output": {**shown["output"], "probes": [[0.5, 0.01, 0.01]] * 1_500_000}})
-    with sqlite3.connect(server.data_dir / "jobs.db", timeout=30) as db:
-        db.execute("UPDATE voxelastic_jobs SET spec = ? WHERE id = ?", (huge, job_id))
-    api = psutil.Process(server.proc.pid)
-    stop = threading.Event()
+    try:
+        server.wait_running(job_id, stage=None)
+        shown = server.job(job_id)["spec"]
+        assert shown["grid"]["resolution"] == 64
+        api = psutil.Process(server.proc.pid)
 
-    def stream() -> None:
-        with httpx.stream("GET", f"{server.url}/jobs/{job_id}/events", headers={"Authorization": f"Bearer {ALICE}"},
-                          timeout=60) as r:
-            for _ in r.iter_lines():
-                if stop.is_set():
-                    return
+        def streamed_cpu() -> float:
+            """API CPU seconds while 4 event streams (5 polls a second each) follow the job for 3 s."""
+            stop = threading.Event()
 
-    threads = [threading.Thread(target=stream, daemon=True) for _ in range(4)]
-    before = sum(api.cpu_times()[:2])
-    for t in threads:
-        t.start()
-    time.sleep(3)
-    used = sum(api.cpu_times()[:2]) - before
-    # every stream polls 5 times a second: 60 reads (and parses) of 30 MB took the API tens of seconds
-    assert used < 1.0, used
-    t = time.monotonic()
-    assert server.client.get("/health").status_code == 200
-    assert time.monotonic() - t < 0.5
-    stop.set()
-    # the status still shows the spec, as stored
-    assert len(server.job(job_id)["spec"]["output"]["probes"]) == 1_500_000
-    assert server.client.delete(f"/jobs/{job_id}").status_code in (200, 202)
-    for t in threads:
-        t.join(30)
+            def stream() -> None:
+                with httpx.stream("GET", f"{server.url}/jobs/{job_id}/events",
+                                  headers={"Authorization": f"Bearer {ALICE}"}, timeout=60) as r:
+                    for _ in r.iter_lines():
+                        if stop.is_set():
+                            return
+
+            threads = [threading.Thread(target=stream, daemon=True) for _ in range(4)]
+            before = sum(api.cpu_times()[:2])
+            for t in threads:
+                t.start()
+            time.sleep(3)
+            used = sum(api.cpu_times()[:2]) - before
+            stop.set()
+            for t in threads:
+                t.join(30)
+            return used
+
+        small = streamed_cpu()
+        # a stored spec of 30 MB (an older server had no cap): polls that read and parsed it took the
+        # API 3.0 s of CPU in these 3 s; what is left is SQLite stepping over the row's large column
+        # (~0.6 s). Compared with the same streams on the small spec in the same run, not with a clock
+        huge = json.dumps({**shown, "output": {**shown["output"], "probes": [[0.5, 0.01, 0.01]] * 1_500_000}})
+        with sqlite3.connect(server.data_dir / "jobs.db", timeout=30) as db:
+            db.execute("UPDATE voxelastic_jobs SET spec = ? WHERE id = ?", (huge, job_id))
+        large = streamed_cpu()
+        assert large < small + 2.0, (small, large)
+        # the status still shows the spec, as stored
+        assert len(server.job(job_id)["spec"]["output"]["probes"]) == 1_500_000
+    finally:  # a long job left running would hold the one worker from the tests after this one
+        server.client.delete(f"/jobs/{job_id}")
 
 
 # --- item 2: a rejected upload's memory goes with its request -------------------------------------
