@@ -45,7 +45,7 @@ def _read_spec(path: str):
 def _output_problem(path: str, inputs: list[Path]) -> str | None:
     """Why a result cannot be written at ``path`` (None if it can), found before any work; ``inputs``
     (the job and mesh files) are never overwritten."""
-    from .output import replace_problem
+    from .targets import replace_problem
 
     p = Path(path)
     if p.suffix in (".xdmf", ".vtkhdf"):
