@@ -12,7 +12,7 @@ import numpy as np
 
 from ..boundary import evaluate, select_patch
 from ..errors import BoundaryError
-from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions
+from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions, torque_vector
 from .integrals import projected_load, surface_points
 
 
@@ -20,25 +20,24 @@ class BoundaryTerms:
     """Boundary terms of ``DGElasticity`` (see the module docstring)."""
 
     def _dirichlet_patches(self) -> dict:
-        """Surface patches of the displacement boundaries: one row per (boundary, element)."""
+        """Surface patches of the displacement boundaries: one row per (element, held components),
+        so that boundaries meeting in an element share its penalty (eta_b grows with the held area)
+        and its projection, as one boundary over both parts would."""
         el = self.elements
-        tris, elem, patch, masks, values = [], [], [], [], []
-        count = 0
+        tris, elem, masks, which = [], [], [], []
         for k, bc in enumerate(self.prescribed):
             clipped, source = select_patch(bc.region, el.boundary_triangles, bc.name)
-            owner = el.boundary_element[source]
-            uniq, local = np.unique(owner, return_inverse=True)
-            comp = bc.mask(3)
             tris.append(clipped)
-            elem.append(owner)
-            patch.append(local + count)
-            masks.append(np.tile(comp.astype(float), (len(uniq), 1)))
-            values += [k] * len(uniq)
-            count += len(uniq)
-        if count == 0:
+            elem.append(el.boundary_element[source])
+            masks.append(np.broadcast_to(bc.mask(3), (len(clipped), 3)))
+            which.append(np.full(len(clipped), k))
+        if not tris:
             return {"count": 0}
-        return {"count": count, "triangles": np.concatenate(tris), "element": np.concatenate(elem),
-                "patch": np.concatenate(patch), "mask": np.concatenate(masks), "boundary": np.asarray(values)}
+        elem, masks = np.concatenate(elem), np.concatenate(masks)
+        key = elem * 8 + masks @ np.array([1, 2, 4])
+        rows, patch = np.unique(key, return_inverse=True)
+        return {"count": len(rows), "triangles": np.concatenate(tris), "element": elem, "patch": patch,
+                "mask": ((rows[:, None] % 8) >> np.arange(3) & 1).astype(float), "boundary": np.concatenate(which)}
 
     def _loads(self) -> np.ndarray:
         """Consistent load vector [E, 3, n] [N] of body force and surface loads (unscaled)."""
@@ -81,7 +80,7 @@ class BoundaryTerms:
         mask = P["mask"][patch]
         g = np.zeros((len(sp_.points), 3))
         for k, bc in enumerate(self.prescribed):
-            on = P["boundary"][patch] == k
+            on = P["boundary"][sp_.triangle] == k
             if not np.any(on):
                 continue
             g[on] = bc.values(sp_.points[on])  # shape and finiteness checked, naming the boundary
@@ -111,7 +110,7 @@ class BoundaryTerms:
 
     def _free_modes(self) -> list:
         """Per body, the rigid modes the Dirichlet patches leave free: (elements, basis [E_b*3*n, k])."""
-        el, basis = self.elements, self.basis
+        el = self.elements
         body = el.bodies()
         P = self.patches
         held = np.zeros((body.max() + 1, 6, 6))
@@ -125,7 +124,7 @@ class BoundaryTerms:
             r = rigid_motions(sp_.points, centre[b])  # [Q, 6, 3], each body's about its centre
             r = r * mask[:, None, :]
             np.add.at(held, b, sp_.weights[:, None, None] * np.einsum("qmp,qlp->qml", r, r))
-        out = []
+        out, loose_bodies = [], []
         for label in np.unique(body):
             members = np.nonzero(body == label)[0]
             scale = np.bincount(body, weights=el.volume)[label] ** (1 / 3)
@@ -139,17 +138,21 @@ class BoundaryTerms:
             modes = self._mode_coefficients(members, centre[label], S @ loose)  # [members * 3 n, k]
             q, _ = np.linalg.qr(modes)
             out.append((members, q))
+            loose_bodies.append(label)
         if out:
             size = np.abs(self.load_vector).sum()
-            for members, q in out:
+            for (members, q), label in zip(out, loose_bodies):
                 f = self.load_vector[members].reshape(-1)
                 if size > 0 and np.abs(q.T @ f).max() * np.sqrt(len(f)) > BALANCE_TOLERANCE * size:
-                    # work of the loads on a unit translation: the coefficients of 1 are L[:, 0, :]
-                    net = np.einsum("epi,ei->p", self.load_vector[members], basis.L[members][:, 0, :])
+                    # the loads' work on unit translations and rotations about the centroid: a pure
+                    # couple has no net force, and naming only that read "[0.0, -0.0, 0.0] N"
+                    work = self._mode_coefficients(members, centre[label], np.eye(6)).T @ f
                     raise UnbalancedLoadError(
                         f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body of "
                         f"{len(members)} element(s) free and its loads do not balance (net force "
-                        f"{np.round(net, 9).tolist()} N); add a displacement boundary on that body or balance the loads")
+                        f"{(np.round(work[:3], 9) + 0.0).tolist()} N, net torque about its centroid "
+                        f"{torque_vector(work[3:], 9)} N m); add a displacement boundary on that body or balance "
+                        "the loads")
             self.warnings.append(
                 f"{sum(q.shape[1] for _, q in out)} rigid-body mode(s) are not held by any displacement boundary; "
                 "the loads balance, so the solution is the one with no rigid motion (orthogonal to those modes)")

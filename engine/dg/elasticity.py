@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..boundary import Prescribed, check_holds
+from ..boundary import Prescribed, check_holds, exclusive_holds
 from ..errors import VoxelasticError
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface
@@ -115,8 +115,9 @@ class DGElasticity(BoundaryTerms, Fields):
         self.timings["element_blocks"] = time.perf_counter() - t
         say("boundaries and loads", 0.4)
         t = time.perf_counter()
-        self.patches = self._dirichlet_patches()
         self.warnings += check_holds(self.prescribed, self.surface)
+        self.prescribed = exclusive_holds(self.prescribed, self.surface)
+        self.patches = self._dirichlet_patches()
         self.load_vector = self._loads()
         self.timings["loads"] = time.perf_counter() - t
         self.modes = self._free_modes()
