@@ -501,6 +501,12 @@ def facet_measures(facets: np.ndarray) -> np.ndarray:
     return _measure_and_normal(np.asarray(facets, dtype=float))[0]
 
 
+def area_vectors(facets: np.ndarray) -> np.ndarray:
+    """Area [m^2] (3D) or length [m] (2D) times the unit outward normal [M, d] of simplices [M, d, d]."""
+    measure, normals = _measure_and_normal(np.asarray(facets, dtype=float))
+    return measure[:, None] * normals
+
+
 def subdivided(facets: np.ndarray, longest: float) -> np.ndarray:
     """Facets [M, d, d] cut by edge midpoints into pieces [K, d, d] whose edges are at most ``longest`` [m]."""
     return _refine(np.asarray(facets, dtype=float).reshape(-1, facets.shape[-1], facets.shape[-1]), longest)

@@ -20,7 +20,8 @@ from dataclasses import InitVar, dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import Prescribed, SurfaceLoad, check_holds, evaluate, exclusive_holds, facet_measures, patch_quadrature, tractions
+from ..boundary import (Prescribed, SurfaceLoad, area_vectors, check_holds, evaluate, exclusive_holds, facet_measures,
+                        patch_quadrature, select_patch, tractions)
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.fractions import VolumeFractions
 from ..geometry.surface import Surface
@@ -51,6 +52,9 @@ CHUNK = 1 << 18
 # measure, tip 30 / 24 / 4 / 7 / 3% under DG k = 2's, mostly the partial layers' bending stiffness
 # (docs/design-notes.md, "Cut cells weighed at their solid's centroid")
 THIN_CELLS = 1.5
+# a divergence-form load whose net force is off the patch's resultant by more than this share of
+# its |traction| integral gets the difference as a uniform traction (``_divergence_gap``)
+GAP_TOLERANCE = 1e-9
 
 
 def thin_solid_warning(surface, h: float) -> list[str]:
@@ -194,15 +198,43 @@ class StaggeredElasticity(StaggeredFields):
         bodies = self._body_lookup() if quadrature else None
         for load in self.surface_loads:
             if load.form == "divergence":
+                before = f.sum(axis=1)
                 self._divergence_load(load, f)
-                continue
-            pts, w, t, _ = self._load_points[id(load)]
+                gap = self._divergence_gap(load, f.sum(axis=1) - before)
+                if gap is None:
+                    continue
+                pts, w, t = gap
+                bodies = self._body_lookup() if bodies is None else bodies
+            else:
+                pts, w, t, _ = self._load_points[id(load)]
             spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
+
+    def _divergence_gap(self, load: SurfaceLoad, net: np.ndarray):
+        """What the divergence form of ``load`` (its net force ``net`` [d] [N]) misses of the patch's
+        resultant, as a uniform traction on the patch: (points [Q, d], weights [Q], traction [Q, d]),
+        or None when it misses nothing. The form reads the stress through whole rows, so a row that
+        sees the patch and a free surface at once (a body one or two cells thick) lost part of its
+        force: 640 of a pressure's 800 N on a plate 1.6 cells thick, a sphere's cap 3.8% short at 6
+        cells across. A closed patch's resultant is zero in both and gets nothing."""
+        d, h = self.dim, self.grid.spacing
+        if load.pressure is not None:  # -p sum(area n) over the patch: exact without a quadrature
+            pieces, _ = select_patch(load.region, self.surface.vertices[self.surface.faces], load.name)
+            vectors = area_vectors(pieces.reshape(-1, d, d))
+            exact = -float(load.pressure) * vectors.sum(axis=0)
+            scale = abs(load.pressure) * np.linalg.norm(vectors, axis=1).sum()
+            if np.linalg.norm(exact - net) <= GAP_TOLERANCE * scale:
+                return None
+        x, w, n = patch_quadrature(self.surface, load.region, h, name=load.name)
+        t = tractions(x, n, name=load.name, pressure=load.pressure, stress=load.stress)
+        exact, scale = (w[:, None] * t).sum(axis=0), (w * np.linalg.norm(t, axis=1)).sum()
+        if np.linalg.norm(exact - net) <= GAP_TOLERANCE * scale or w.sum() <= 0:
+            return None
+        return x, w, np.broadcast_to((exact - net) / w.sum(), (len(w), d))
 
     def _divergence_load(self, load: SurfaceLoad, f: np.ndarray) -> None:
         """Add to ``f`` [d, size] the work of sigma n on the surface written as a volume integral
