@@ -33,6 +33,7 @@ from ..solvers.cg import PCG, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .fields import StaggeredFields
+from .joined import joined_bodies_warning
 from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
 from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
@@ -137,6 +138,7 @@ class StaggeredElasticity(StaggeredFields):
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += check_holds(self.prescribed, self.surface)
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
+        self.warnings += joined_bodies_warning(self.surface, level, grid)
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
