@@ -44,6 +44,17 @@ class Surface:
         return float((p[:, 0, 0] * p[:, 1, 1] - p[:, 1, 0] * p[:, 0, 1]).sum() / 2.0)
 
 
+def thickness(surface: Surface) -> float:
+    """Twice the enclosed volume over the surface area [m] (3D; area over half the perimeter in
+    2D): a plate's thickness, half a square bar's width; inf for a surface enclosing nothing."""
+    p = surface.vertices[surface.faces]
+    if surface.dim == 3:
+        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+    else:
+        area = np.linalg.norm(p[:, 1] - p[:, 0], axis=1).sum()
+    return 2 * surface.enclosed_volume() / area if area > 0 else float("inf")
+
+
 def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """Distances [T] from point p [3] to triangles [T, 3, 3] (Ericson's closest-point regions)."""
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]

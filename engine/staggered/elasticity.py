@@ -20,11 +20,11 @@ from dataclasses import InitVar, dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..boundary import (Prescribed, SurfaceLoad, area_vectors, check_holds, evaluate, exclusive_holds, facet_measures,
+from ..boundary import (Prescribed, SurfaceLoad, area_vectors, check_holds, evaluate, exclusive_holds,
                         patch_quadrature, select_patch, tractions)
 from ..errors import BoundaryError, VoxelasticError
 from ..geometry.fractions import VolumeFractions
-from ..geometry.surface import Surface
+from ..geometry.surface import Surface, thickness
 from ..grid import axis_pairs
 from ..material import Material
 from ..method import Setup, State, no_progress
@@ -62,8 +62,7 @@ def thin_solid_warning(surface, h: float) -> list[str]:
     """A warning when the solid bounded by the closed ``surface`` is thin for cells of ``h`` [m]."""
     if not surface.closed:
         return []
-    area = facet_measures(surface.vertices[surface.faces]).sum()
-    cells = 2 * surface.enclosed_volume() / area / h if area > 0 else np.inf
+    cells = thickness(surface) / h
     if cells >= THIN_CELLS:
         return []
     return [f"the solid is thin for this grid: twice its volume over its surface area (a plate's thickness, half a "
