@@ -68,7 +68,7 @@ def thin_solid_warning(surface, h: float) -> list[str]:
     return [f"the solid is thin for this grid: twice its volume over its surface area (a plate's thickness, half a "
             f"square bar's width) is {cells:.2g} cells of h = {h:.4g} m; below {THIN_CELLS:g} the staggered "
             "method's displacements can be off by 5-30%: refine the grid (grid.resolution, grid.cell_size) or use "
-            "method.kind 'dg'"]
+            "method.kind 'dg' with method.degree 2"]
 
 
 @dataclass
