@@ -45,3 +45,4 @@ def test_bodies_a_cell_apart_one_body_and_a_hollow_body_are_not():
     hollow = trimesh.util.concatenate([outer, cavity])
     hollow.apply_translation([1.0, 0, 0])  # the clamp box takes in the sphere's left cap
     assert not [w for w in _warnings(hollow, 0.2) if JOINED in w]
+

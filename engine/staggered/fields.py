@@ -10,6 +10,7 @@ samples; surface stresses then carry the applied tractions (:mod:`engine.surface
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..grid import axis_pairs
 from ..material import STRESS_FIELDS, strain_fields
@@ -43,7 +44,7 @@ class StaggeredFields(SurfaceStress):
                 data.probes.update(strain_fields(self.point_strain(strain, probes), names, lam, mu, d))
         if surface:
             vertices = self.surface.vertices
-            data.surface["displacement"] = self.point_displacement(state.u, vertices)
+            data.surface["displacement"] = self.surface_displacement(state.u, vertices)
             if strain is not None:
                 data.surface.update(self.surface_stress(self.point_strain(strain, vertices), names, state.load_scale))
         return data
@@ -66,6 +67,21 @@ class StaggeredFields(SurfaceStress):
             return u[a, np.maximum(pos, 0)] * ok, ok
 
         return sampling.interpolate(self.grid, np.asarray(points, dtype=float), lookup)
+
+    def surface_displacement(self, u: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+        """:meth:`point_displacement` [V, d] at surface vertices [V, d], where a vertex's stencil holds
+        no active sample of a component (a self-intersecting shell's fold, a feature thinner than the
+        grid resolves) that component's nearest active sample: a vertex is on the solid, never
+        outside it, and one NaN vertex spread NaN over the viewers' refined surface."""
+        out = self.point_displacement(u, vertices)
+        missing = ~np.isfinite(out)
+        for a in np.nonzero(missing.any(axis=0))[0]:
+            lay = self.level.layout
+            pos = np.nonzero(self.level.active[a, : lay.count * lay.tile_size])[0]
+            samples = lay.index_of(pos) + 0.5 - 0.5 * np.eye(self.dim)[a]
+            at = (np.asarray(vertices)[missing[:, a]] - np.asarray(self.grid.origin)) / self.grid.spacing
+            out[missing[:, a], a] = u[a, pos[cKDTree(samples).query(at)[1]]]
+        return out
 
     def cell_fields(self, u: np.ndarray, names: list[str], strain: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Fields at cell centres [*grid.shape, c], NaN where a cell holds no material; ``strain``:
