@@ -11,10 +11,10 @@ from schemas import parse_job
 JOINED = "separate bodies of the mesh share grid cells"
 
 
-def _warnings(mesh: trimesh.Trimesh, h: float) -> list[str]:
+def _warnings(mesh: trimesh.Trimesh, h: float, clamp=((-1, -1, -1), (0.01, 1, 1))) -> list[str]:
     spec = {"dimension": 3, "geometry": {"mesh": "m.stl"}, "grid": {"cell_size": h, "padding": 1},
             "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3},
-            "boundaries": [{"kind": "displacement", "name": "clamp", "region": {"box": [[-1, -1, -1], [0.01, 1, 1]]},
+            "boundaries": [{"kind": "displacement", "name": "clamp", "region": {"box": [list(clamp[0]), list(clamp[1])]},
                             "value": [0, 0, 0]}]}
     job = parse_job(spec)
     geo = prepare_geometry(job, mesh.export(file_type="stl"), filename="m.stl")
@@ -46,3 +46,19 @@ def test_bodies_a_cell_apart_one_body_and_a_hollow_body_are_not():
     hollow.apply_translation([1.0, 0, 0])  # the clamp box takes in the sphere's left cap
     assert not [w for w in _warnings(hollow, 0.2) if JOINED in w]
 
+
+
+def test_a_core_hinged_to_its_cavity_wall_is_named_in_the_singular_error():
+    """A ball in a spherical cavity 2.4 cells wider: one edge's shear term ties it to the wall, the
+    factor meets the hinge's zero pivot, and the error used to blame thin walls and rods only."""
+    import pytest
+
+    from engine.solvers.linear import SolverError
+
+    outer = trimesh.creation.icosphere(3, 0.5)
+    cavity = trimesh.creation.icosphere(3, 0.3)
+    cavity.invert()
+    core = trimesh.creation.icosphere(3, 0.15)
+    with pytest.raises(SolverError, match=r"singular .*; here 2 separate bodies of the mesh share grid cells .* use "
+                                          r"method.kind 'dg'"):
+        _warnings(trimesh.util.concatenate([outer, cavity, core]), 1.0 / 16, clamp=((-1, -1, -1), (1, 1, -0.45)))

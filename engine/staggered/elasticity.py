@@ -137,7 +137,8 @@ class StaggeredElasticity(StaggeredFields):
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += check_holds(self.prescribed, self.surface)
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
-        self.warnings += joined_bodies_warning(self.surface, level, grid)
+        joined = joined_bodies_warning(self.surface, level, grid)
+        self.warnings += joined
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
@@ -157,8 +158,17 @@ class StaggeredElasticity(StaggeredFields):
                 f"weight was raised to {MIN_FRACTION:g} (bounds the conditioning; adds at most that share of a cell's energy)"
             )
         # a one-level hierarchy is the fine level's factorisation: CG then stops after one step
-        self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
-                                   progress=lambda part, share: say(part, 0.5 + 0.5 * share))
+        try:
+            self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
+                                       progress=lambda part, share: say(part, 0.5 + 0.5 * share))
+        except SolverError as e:
+            if e.reason != "singular" or not joined:
+                raise
+            # bodies joined through a cell or an edge hold each other by a hinge (a core in a cavity
+            # 2.4 cells wide, touching its wall by one edge's shear term)
+            raise SolverError(f"{e}; here {joined[0].split(':')[0]}, which joins them through single cells or "
+                              "edges that hold nothing firmly: refine the grid until each gap spans more than a cell, or "
+                              "use method.kind 'dg'", "singular") from None
         self.space = _Space(level)
         if not self.dynamic:
             # the face fractions weigh the mass and the rigid modes' projection only: a static or
