@@ -76,7 +76,9 @@ def test_corotated_peak_memory_stays_flat_across_fixed_point_iterations():
 
 
 def test_diverging_fixed_point_stops_early_with_a_named_error():
-    out = _job("corotated", 2e5)  # the relative change stays above 1 from the fourth iteration on
+    # the relative change stays above 1 from the fifth iteration on (2e5 diverged before the iteration was
+    # relaxed; it now settles in 81 iterations)
+    out = _job("corotated", 1e6)
     assert out.get("error") == "CorotatedDiverged", out
     assert "diverges" in out["message"] and "more steps" in out["message"], out
     assert out["iterations"] <= 12, out
