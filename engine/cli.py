@@ -71,14 +71,34 @@ class _NoRoom(Exception):
     """The disk holding the output has less room than the result may need."""
 
 
-def _check_room(path: str, shape, fields, *, levels: int = 1, vertices: int = 0, probes: int = 0) -> None:
+def _check_room(path: str, shape, fields, *, levels: int = 1, vertices: int = 0, probes: int = 0,
+                spec=None) -> None:
+    """_NoRoom when the directory of ``path`` has less free space than the result's estimate; with
+    the job's ``spec`` the message names the fields that set the size (steps, grid, output fields)."""
     from .output import estimate_result_bytes
 
     need = estimate_result_bytes(shape, fields, levels=levels, surface_vertices=vertices, probes=probes)
-    free = shutil.disk_usage(Path(path).parent if str(Path(path).parent) else ".").free
-    if free < need:
+    directory = Path(path).parent if str(Path(path).parent) else Path(".")
+    free = shutil.disk_usage(directory).free
+    if free >= need:
+        return
+    grid = "x".join(map(str, shape))
+    if spec is None:
         raise _NoRoom(f"cannot write the result to '{path}': {free / 2**20:.1f} MiB free there, the result of a "
-                      f"{'x'.join(map(str, shape))} grid may need up to {need / 2**20:.1f} MiB")
+                      f"{grid} grid may need up to {need / 2**20:.1f} MiB")
+    size = f"may need up to {need / 2**20:.1f} MiB, and '{directory}' has {free / 2**20:.1f} MiB free"
+    shown = ", ".join(spec.output.fields) or "none"
+    if spec.analysis.kind == "static":
+        raise _NoRoom(f"grid: the result of a {grid} grid with output.fields [{shown}] {size}; lower "
+                      "grid.resolution (or raise grid.cell_size) or output fewer fields")
+    raise _NoRoom(f"analysis.steps: the result of {spec.analysis.steps} steps, each holding output.fields "
+                  f"[{shown}] on a {grid} grid, {size}; lower analysis.steps or grid.resolution (or raise "
+                  "grid.cell_size), or output fewer fields")
+
+
+def _result_levels(spec) -> int:
+    """The states a job's result holds: the final one and one per step of a quasi-static or dynamic job."""
+    return 1 + (spec.analysis.steps if spec.analysis.kind != "static" else 0)
 
 
 def _admit(spec, base_dir: Path):
@@ -101,6 +121,7 @@ def _admit(spec, base_dir: Path):
     entry = method_entry(spec.method.kind)
     entry.check_dimension(spec.dimension)
     _check_memory(grid, entry, spec.method, limits, surface)
+    entry.check_job(spec, grid)
     return surface, grid
 
 
@@ -200,10 +221,19 @@ def cmd_validate(args) -> int:
     spec = _read_spec(args.job)
     if isinstance(spec, list):
         return _error(spec)
+    if args.output:
+        mesh = spec.geometry.mesh
+        inputs = [Path(args.job)] + ([Path(args.job).resolve().parent / mesh] if mesh else [])
+        problem = _output_problem(args.output, inputs)
+        if problem:
+            return _error(problem)
     try:  # what run checks before any work: the mesh, its facets, the grid and its memory estimate
         surface, grid = _admit(spec, Path(args.job).resolve().parent)
+        # and the room for the result where run would write it (-o; by default here)
+        _check_room(args.output or "result.h5", grid.shape, spec.output.fields, levels=_result_levels(spec),
+                    probes=len(spec.output.probes), spec=spec)
         notes = _boundary_checks(spec, surface)
-    except VoxelasticError as exc:
+    except (VoxelasticError, _NoRoom) as exc:
         return _error(str(exc))
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
@@ -274,11 +304,11 @@ def cmd_run(args) -> int:
     if args.arch:
         spec = spec.model_copy(update={"solver": spec.solver.model_copy(update={"arch": args.arch})})
     bar = ProgressBar(rtol=spec.solver.rtol)
-    levels = 1 + (spec.analysis.steps if spec.analysis.kind != "static" else 0)
 
     def progress(stage: str, fraction: float, info: dict) -> None:
         if stage == "grid":  # the grid is known, nothing large is allocated yet: is there room?
-            _check_room(args.output, info["shape"], spec.output.fields, levels=levels, probes=len(spec.output.probes))
+            _check_room(args.output, info["shape"], spec.output.fields, levels=_result_levels(spec),
+                        probes=len(spec.output.probes), spec=spec)
         bar(stage, fraction, info)
 
     try:
@@ -326,6 +356,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="check a job spec; print OK or every error with its path")
     p.add_argument("job", help="job spec (JSON)")
+    p.add_argument("-o", "--output", help="the result file run would write: its directory must have room for the "
+                                          "result (default: the current directory)")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("voxelize", help="exact volume fractions of a mesh on a grid, written to HDF5 (+ XDMF)")

@@ -33,3 +33,8 @@ class ThinFeatureError(VoxelasticError):
 class BackendError(VoxelasticError, RuntimeError):
     """The compute backend a job asks for (``solver.arch``, ``solver.precision``) cannot run here:
     no CUDA on this machine, or a process already running its kernels on another one."""
+
+
+class PrecisionRangeError(VoxelasticError):
+    """An input outside what the job's solve precision holds (``solver.precision`` 'f32'): names
+    the field, the range that precision holds for the job and the way out."""

@@ -12,8 +12,9 @@ A method is a package under ``engine/`` providing
 (imported only when a job asks for the method), and one :class:`MethodEntry` in :data:`METHODS`:
 the schema's ``method.kind``, the cut-cell geometry it discretizes (``"fractions"``: exact volume
 fractions of every staggered control volume; ``"cut_cells"``: every cell's pieces as polyhedra),
-the dimensions it supports and where those two functions are. The pipeline, the admission checks and the CLI go through the
-registry and never name a method. Adding one: docs/design-notes.md, "Adding a method".
+the dimensions it supports and where those two functions are (and, optionally, ``checks(spec, grid)``:
+limits of its own on a validated job, such as the values its solve precision holds). The pipeline,
+the admission checks and the CLI go through the registry and never name a method. Adding one: docs/design-notes.md, "Adding a method".
 """
 
 from __future__ import annotations
@@ -88,6 +89,13 @@ class MethodEntry:
     dimensions: tuple[int, ...]
     builder: str
     memory: str
+    checks: str | None = None
+
+    def check_job(self, spec: Any, grid: Grid) -> None:
+        """The method's own limits on a validated job on its grid, found before any work (the range of
+        values its solve precision holds): a VoxelasticError naming the field."""
+        if self.checks is not None:
+            _load(self.checks)(spec, grid)
 
     def estimate_memory(self, grid: Grid, method_spec: Any, surface: Any = None, occupied: int | None = None) -> int:
         """Upper estimate of the job's peak memory [bytes] from the grid, the spec's ``method`` and, when
@@ -117,7 +125,8 @@ def _load(target: str) -> Callable:
 METHODS: dict[str, MethodEntry] = {
     "staggered": MethodEntry("staggered", geometry="fractions", dimensions=(2, 3),
                              builder="engine.staggered.problem:make_staggered",
-                             memory="engine.staggered.problem:estimate_memory"),
+                             memory="engine.staggered.problem:estimate_memory",
+                             checks="engine.staggered.precision:check_job"),
     "dg": MethodEntry("dg", geometry="cut_cells", dimensions=(3,),
                       builder="engine.dg.problem:make_dg", memory="engine.dg.problem:estimate_memory"),
 }

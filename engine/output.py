@@ -19,6 +19,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from schemas.job import MAX_STEPS as _MAX_STEPS  # step groups are named with 4 digits
 
 from . import __version__
 from .errors import ResultFormatError
@@ -55,7 +56,6 @@ _CHUNK_BYTES = 1 << 20
 _GZIP_LEVEL = 4
 # Probe/surface arrays below this many elements are stored contiguous, uncompressed.
 _COMPRESS_MIN_ELEMENTS = 1 << 16
-_MAX_STEPS = 10_000  # step groups are named with 4 digits
 _VF_TOLERANCE = 1e-9  # exact cut-cell volumes may exceed 1 by round-off
 
 
@@ -377,8 +377,8 @@ def outside_probes_warning(result: Result, shown: int = 5) -> str | None:
     """
     if result.probe_points is None or not result.fields.probes:
         return None
-    # outside, some fields have nothing to interpolate (NaN) while others may still reach in from
-    # a neighbouring face (the staggered displacement): any NaN marks the probe
+    # the pipeline decides "outside" from the surface and blanks every field there
+    # (engine.geometry.containment); a result made some other way may have NaN in only some
     n = len(result.probe_points)
     outside = np.zeros(n, dtype=bool)
     for values in result.fields.probes.values():
@@ -386,7 +386,7 @@ def outside_probes_warning(result: Result, shown: int = 5) -> str | None:
     count = int(outside.sum())
     if count == 0:
         return None
-    where = ", ".join("(" + ", ".join(f"{c:g}" for c in point) + ")" for point in result.probe_points[outside][:shown])
+    where = ", ".join("(" + ", ".join(f"{c:.12g}" for c in point) + ")" for point in result.probe_points[outside][:shown])
     more = f" and {count - shown} more" if count > shown else ""
     return (f"{count} of {n} probes lie outside the solid, where there is nothing to sample "
             f"(NaN in their values): {where}{more}")

@@ -22,6 +22,7 @@ from schemas import JobSpec, parse_job
 
 from .errors import BoundaryError, GeometryError, GridError
 from .geometry.cache import GeometryCache, cache_key, default_directory
+from .geometry.containment import in_solid
 from .geometry.fractions import VolumeFractions, volume_fractions
 from .geometry.loading import load_surface
 from .geometry.polygon import polygon_surface
@@ -139,6 +140,7 @@ def prepare_geometry(
     entry.check_dimension(spec.dimension)
     method = entry.kind
     _check_memory(entry.estimate_memory(grid, spec.method, surface=surface), grid, method, limits)
+    entry.check_job(spec, grid)
     times["grid"] = time.perf_counter() - t
     progress("grid", 0.1, {"shape": list(grid.shape), "spacing": grid.spacing})
 
@@ -268,12 +270,17 @@ def run(
     # the rest goes before the solve (for the staggered method: its face and edge fractions)
     result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
     warnings = geo.warnings
+    probes = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
+    outside = None if probes is None else ~in_solid(geo.surface, probes, geo.grid.spacing)
     del geo
     t = time.perf_counter()
     outcome = run_analysis(method, spec.analysis, spec.output, progress)
     times["solve"] = time.perf_counter() - t
     result.fields, result.steps = outcome.final, outcome.steps
-    result.probe_points = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
+    result.probe_points = probes
+    if outside is not None and outside.any():
+        for level in [result.fields, *result.steps]:
+            blank_probes(level, outside)
     if not spec.output.surface:
         result.surface_vertices = result.surface_faces = None
     result.solver = SolverReport(
@@ -284,6 +291,16 @@ def run(
     )
     progress("done", 1.0, {"iterations": outcome.iterations, "residual": outcome.residual})
     return result
+
+
+def blank_probes(level: FieldData, outside: np.ndarray) -> None:
+    """NaN in every field of ``level`` at the probes ``outside`` [P] bool: a method's samples may
+    reach a little beyond the surface (the staggered displacement of a face's samples, a strain
+    fitted from the cells around), but a probe outside the solid has no value to report."""
+    for name, values in level.probes.items():
+        values = np.array(values, dtype=float)
+        values[outside] = np.nan
+        level.probes[name] = values
 
 
 def _discretize(spec: JobSpec, geo: Geometry, functions: Functions, progress: Setup | None = None) -> Method:

@@ -10,7 +10,8 @@ Content: the material cells of ``engine.views.solid_mesh`` (hexahedra, quadrilat
 points padded with z = 0), cell data ``volume_fraction`` and every cell field, point data
 displacement / velocity / von Mises at the corners. A quasi-static or dynamic result is temporal:
 the geometry is stored once and every step's values follow each other in the data arrays, with
-``/VTKHDF/Steps`` giving each step's time and offsets (VTKHDF 2.0, "Temporal data").
+``/VTKHDF/Steps`` giving each step's time and offsets (VTKHDF 2.0, "Temporal data"), and the field
+data ``Time`` holding it too (what VTK shows of a single step's time).
 """
 
 from __future__ import annotations
@@ -96,6 +97,10 @@ def _steps(root: h5py.Group, times: list[float], n_cells: int, n_points: int,
         g = steps.create_group(group)
         for name in arrays:
             g.create_dataset(name, data=k * count)
+    # VTK reads Steps only for two or more: a one-step result (a dynamic job of one step) had no
+    # time at all, which the field "Time", one value per step, carries either way
+    root.create_group("FieldData").create_dataset("Time", data=np.asarray(times, dtype=np.float64))
+    steps.create_group("FieldDataOffsets").create_dataset("Time", data=k)
 
 
 def _compressed(size: int) -> dict:

@@ -290,6 +290,21 @@ Boundary = Annotated[
 # --- analysis, solver, output -------------------------------------------------------------------
 
 
+MAX_STEPS = 10_000
+"""Most steps of a quasi-static or dynamic job: the result names each step's group with four digits
+(``steps/0000`` .. ``steps/9999``), and a job with more used to run to the end and fail writing."""
+
+
+def _fits_the_result(steps: int) -> int:
+    if steps > MAX_STEPS:
+        raise custom_error("too_many_steps", f"{steps} steps; a result holds at most {MAX_STEPS} (each step is a "
+                           "numbered group of the file): take fewer, longer steps")
+    return steps
+
+
+Steps = Annotated[Integer, AfterValidator(_fits_the_result)]
+
+
 class StaticAnalysis(SpecModel):
     """One equilibrium solve with the full loads."""
 
@@ -302,7 +317,7 @@ class QuasistaticAnalysis(SpecModel):
 
     model_config = TAGGED
     kind: Literal["quasistatic"] = "quasistatic"
-    steps: Integer = Field(ge=1, description="Number of load steps.")
+    steps: Steps = Field(ge=1, json_schema_extra={"maximum": MAX_STEPS}, description="Number of load steps.")
 
 
 class DynamicAnalysis(SpecModel):
@@ -311,7 +326,7 @@ class DynamicAnalysis(SpecModel):
     model_config = TAGGED
     kind: Literal["dynamic"] = "dynamic"
     time_step: Annotated[Real, _in_scale("s")] = Field(gt=0, json_schema_extra=SCALE_SCHEMA, description="Time step dt [s].")
-    steps: Integer = Field(ge=1, description="Number of time steps.")
+    steps: Steps = Field(ge=1, json_schema_extra={"maximum": MAX_STEPS}, description="Number of time steps.")
 
 
 Analysis = Annotated[

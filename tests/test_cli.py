@@ -65,8 +65,8 @@ def test_run_writes_the_result_of_the_example(tmp_path):
 @pytest.mark.parametrize(
     "mesh_text, reason",
     [
-        ("this is not a mesh", "cannot read mesh"),
-        ("", "cannot read mesh"),
+        ("this is not a mesh", "error: geometry.mesh: cannot read 'broken.stl'"),
+        ("", "error: geometry.mesh: cannot read 'broken.stl'"),
     ],
 )
 def test_bad_mesh_is_one_clear_line(tmp_path, mesh_text, reason):

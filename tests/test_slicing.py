@@ -24,7 +24,7 @@ from engine.geometry.moments import (
 )
 from engine.geometry.slicing import CutCells, slice_cells
 from engine.geometry.surface import Surface
-from engine.grid import Grid
+from engine.grid import Grid, make_grid
 
 DEGREE = 4
 
@@ -141,6 +141,20 @@ def test_box_on_grid_planes_exposes_full_cell_faces():
     assert cut.num_faces == 2 * 2 + 3 * 1
     assert _boundary_area(cut) == pytest.approx(2 * (1.5 * 1.0 + 1.5 * 0.5 + 1.0 * 0.5), rel=1e-14)
     assert len(cut.boundary_triangles) == 2 * (2 * 3 + 2 * 6 + 2 * 2)  # two triangles per exposed cell face
+
+
+def test_round_off_slivers_of_a_cube_on_grid_planes_are_dropped_without_a_warning():
+    """A unit cube whose faces lie on grid planes leaves 13 pieces of round-off (5.4e-18 m^3 in all);
+    they used to be a warning, "dropped 13 sliver pieces below 1e-12 h^3", that asked nothing of anyone."""
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    box.apply_translation((0.5, 0.5, 0.5))
+    grid = make_grid(np.zeros(3), np.ones(3), resolution=6, padding=1)  # as a job's grid.resolution 6 makes it
+    h = grid.spacing
+    stats = {}
+    cut = slice_cells(_surface(box), grid, DEGREE, stats=stats)
+    assert cut.warnings == []
+    assert stats["dropped"] == 13 and 0 < stats["dropped_volume"] < 13e-12 * h**3
+    assert cut.volume.sum() == pytest.approx(1.0, rel=1e-14)
 
 
 def test_surface_partly_in_a_grid_plane_splits_the_face():

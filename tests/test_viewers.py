@@ -141,6 +141,24 @@ def test_pyvista_and_vtk_read_the_vtkhdf_file(results):
                     dynamic, f"steps/{k:04d}/")
 
 
+def test_a_one_step_vtkhdf_file_carries_its_time(results, tmp_path):
+    """VTK reads /VTKHDF/Steps only for two steps or more: a dynamic job of one step wrote a file
+    without the time that the HDF5 result and the .solid.xdmf carry; the field "Time" holds it."""
+    from vtkmodules.vtkIOHDF import vtkHDFReader
+
+    spec = bar_spec({"kind": "dynamic", "time_step": 2e-3, "steps": 1}, 8)
+    one = write_result(engine.simulate(spec, ROOT / "examples" / "cantilever.stl"), tmp_path / "one.h5")
+    np.testing.assert_array_equal(pv.read(one.with_suffix(".vtkhdf")).field_data["Time"], [2e-3])
+    assert 'Time Value="0.002"' in one.with_suffix(".solid.xdmf").read_text()
+    reader = vtkHDFReader()  # and the time series keeps one value per step
+    reader.SetFileName(str(results["dynamic"].with_suffix(".vtkhdf")))
+    for k in range(3):
+        reader.SetStep(k)
+        reader.Update()
+        time = reader.GetOutput().GetFieldData().GetArray("Time")
+        assert (time.GetNumberOfTuples(), time.GetValue(0)) == (1, pytest.approx(2e-3 * (k + 1)))
+
+
 def test_vtk_xdmf_reader_opens_the_solid_time_series(results):
     from vtkmodules.vtkIOXdmf2 import vtkXdmfReader
 

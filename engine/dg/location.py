@@ -9,16 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.containment import ON_SURFACE, surface_tolerance
 from ..geometry.slicing import CutCells
 from ..geometry.surface import Surface, point_triangle_distance
 from ..geometry.winding import inside
 from .elements import Elements
-
-# A point this close to the surface is on it: the mesh's own vertices and face points given as
-# probes, up to the round-off of placing and scaling them (ON_SURFACE cells) and of the file's
-# numbers (ROUND_OFF of the part's size: a float32 STL stores 0.65 as 0.64999998)
-ON_SURFACE = 1e-9
-ROUND_OFF = 1e-6
 
 
 def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarray) -> np.ndarray:
@@ -28,8 +23,8 @@ def locate(elements: Elements, cut: CutCells, surface: Surface, points: np.ndarr
     grid = elements.grid
     # the winding number costs O(points x triangles): only points in cut cells need it. A point
     # strictly inside a full cell is in that cell's element, one in a cell without pieces is outside
-    lower, upper = surface.bounds
-    tol = max(ON_SURFACE, ROUND_OFF * float(np.linalg.norm(upper - lower)) / grid.spacing)  # [cells]
+    # on the surface means what it means for every method (engine.geometry.containment)
+    tol = surface_tolerance(surface, grid.spacing) / grid.spacing  # [cells]
     rel = (points - np.asarray(grid.origin)) / grid.spacing
     cell = np.floor(rel).astype(np.int64)
     interior = np.all((rel - cell > tol) & (rel - cell < 1 - tol), axis=1)

@@ -9,6 +9,7 @@ complement of those modes. Unbalanced loads on a free body are an error naming t
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -171,6 +172,17 @@ def _mode_norms(points: np.ndarray, center: np.ndarray, axis: np.ndarray, d: int
     return np.where(norms > 0, norms, 1.0)
 
 
+def torque_vector(planes: Sequence[float], digits: int) -> list[float] | float:
+    """The torque [N m] (2D: per unit thickness [N]) of the work of loads on the unit rotations in the
+    planes (k, l), k < l, of :func:`rigid_modes` (sum r_k f_l - r_l f_k each), as it is written: the
+    vector [T_x, T_y, T_z] in 3D (the planes (0, 1), (0, 2), (1, 2) turn about z, -y and x), the
+    scalar T_z in 2D; rounded to ``digits``."""
+    planes = [float(v) for v in planes]
+    if len(planes) == 1:
+        return round(planes[0], digits) + 0.0
+    return [round(v, digits) + 0.0 for v in (planes[2], -planes[1], planes[0])]
+
+
 def check_balance(points: np.ndarray, axis: np.ndarray, loads: np.ndarray, modes: list) -> None:
     """Raise ``UnbalancedLoadError`` when ``loads`` [n] [N] do work on a free mode of ``modes``
     (from :func:`free_modes`) beyond the tolerance, naming the net force and torque of that body."""
@@ -187,14 +199,14 @@ def check_balance(points: np.ndarray, axis: np.ndarray, loads: np.ndarray, modes
             c = x.mean(axis=0)
             force = np.array([f[axis[dofs] == k].sum() for k in range(d)])
             r = x - c
-            torque = [
+            planes = [
                 float((np.where(axis[dofs] == l, r[:, k], 0.0) * f - np.where(axis[dofs] == k, r[:, l], 0.0) * f).sum())
                 for k, l in itertools.combinations(range(d), 2)
             ]
             raise UnbalancedLoadError(
                 f"boundaries: the displacement boundaries leave {q.shape[1]} rigid-body mode(s) of a body free, and its "
-                f"loads do not balance: net force {np.round(force, 12).tolist()} N, net torque about its centroid "
-                f"{np.round(torque, 12).tolist()} N m (total load {size:.6g} N); hold every component on a patch "
+                f"loads do not balance: net force {(np.round(force, 12) + 0.0).tolist()} N, net torque about its centroid "
+                f"{torque_vector(planes, 12)} N m (total load {size:.6g} N); hold every component on a patch "
                 "that spans more than a grid cell each way along the surface (a strip narrower than a cell, or a body "
                 "thinner than one, can leave a rotation free: refine the grid), or balance the loads"
             )

@@ -117,10 +117,11 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
     """Run one job through the pipeline's stages (see the module docstring); ``grid``: a pinned
     ``engine.grid.Grid`` instead of the spec's centred one. Raises what the engine raises."""
     from engine.analysis import run_analysis
+    from engine.geometry.containment import in_solid
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.method import method_entry
-    from engine.pipeline import Functions, compute_geometry
+    from engine.pipeline import Functions, blank_probes, compute_geometry
     from engine.runtime import init
     from schemas import parse_job
 
@@ -143,6 +144,10 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
 
     method.solve = recorded  # every step's solve statistics, not only the last one's
     outcome = run_analysis(method, parsed.analysis, parsed.output, lambda *a: None)
+    if parsed.output.probes:  # as engine.pipeline.run: a probe outside the solid has no values
+        outside = ~in_solid(surface, np.asarray(parsed.output.probes, dtype=float), grid.spacing)
+        for level in [outcome.final, *outcome.steps]:
+            blank_probes(level, outside)
     seconds = time.perf_counter() - t0
     t1 = time.perf_counter()
     cond = condition_number(method) if condition else math.nan
