@@ -76,7 +76,7 @@ def test_a_bz2_bomb_stops_at_the_cap_without_inflating_it():
     bomb = zeros_bz2(2**28)
     assert len(bomb) < 300  # 256 MiB of zeros
     t = time.perf_counter()
-    with pytest.raises(InflateLimitError, match=r"^'b.stl.bz2' inflates to more than 8388608 bytes, the limit"):
+    with pytest.raises(InflateLimitError, match=r"^geometry\.mesh: 'b.stl.bz2' inflates to more than 8388608 bytes, the limit"):
         load_surface(bomb, filename="b.stl.bz2", max_inflated_bytes=8 << 20)
     assert time.perf_counter() - t < 2.0  # 8 MiB inflated, not 1 GiB
 
@@ -98,13 +98,13 @@ def test_zip_and_tar_bombs_are_refused_by_what_they_produce_not_what_they_declar
 @pytest.mark.parametrize(
     "name, data, expected",
     [
-        ("x.3mf", b"PK\x05\x06" + b"\0" * 18, "cannot read mesh 'x.3mf': it is not a valid 3MF file, or it is damaged"),
+        ("x.3mf", b"PK\x05\x06" + b"\0" * 18, "geometry.mesh: cannot read 'x.3mf': it is not a valid 3MF file, or it is damaged"),
         ("x.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
-         "cannot read mesh 'x.ply': it is not a valid PLY file, or it is damaged or incomplete; its header must"),
+         "geometry.mesh: cannot read 'x.ply': it is not a valid PLY file, or it is damaged or incomplete; its header must"),
         ("x.gltf", b'{"asset": {"version": "2.0"}, "meshes": [{}]}',
-         "cannot read mesh 'x.gltf': it is not a valid GLTF file, or it is damaged or incomplete; a .gltf must embed"),
-        ("x.stl.bz2", b"BZh9 not bzip2 at all", "cannot read 'x.stl.bz2': it is not a valid bzip2 file"),
-        ("x.zip", zipped({"notes.txt": b"no mesh"}), "cannot read mesh 'x.zip': no mesh file inside (found: notes.txt)"),
+         "geometry.mesh: cannot read 'x.gltf': it is not a valid GLTF file, or it is damaged or incomplete; a .gltf must embed"),
+        ("x.stl.bz2", b"BZh9 not bzip2 at all", "geometry.mesh: cannot read 'x.stl.bz2': it is not a valid bzip2 file"),
+        ("x.zip", zipped({"notes.txt": b"no mesh"}), "geometry.mesh: cannot read 'x.zip': no mesh file inside (found: notes.txt)"),
     ],
 )
 def test_malformed_files_are_named_in_words_not_exceptions(name, data, expected):

@@ -203,7 +203,7 @@ def test_stl_corners_are_merged_and_vertex_order_of_obj_is_kept():
 
 def test_nan_vertex_is_rejected():
     obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 1\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 3 1 4\n"
-    message = r"^mesh 'a.obj': 1 of the 4 vertices has non-finite coordinates \(NaN or infinity\)$"
+    message = r"^geometry\.mesh: 'a.obj': 1 of the 4 vertices has non-finite coordinates \(NaN or infinity\)$"
     with pytest.raises(GeometryError, match=message):
         load_surface(obj, filename="a.obj")
     box = trimesh.creation.box()
@@ -215,20 +215,20 @@ def test_nan_vertex_is_rejected():
 
 @pytest.mark.parametrize("filename", ["x.stl", "x.ply", "x.off", "x.glb", "x.obj"])
 def test_garbage_bytes_are_rejected(filename):
-    with pytest.raises(GeometryError, match=rf"^cannot read mesh '{filename}': "):
+    with pytest.raises(GeometryError, match=rf"^geometry\.mesh: cannot read '{filename}': "):
         load_surface(b"\x00\x01garbage\xff\xfe 12 x", filename=filename)
 
 
 def test_unreadable_sources_name_the_problem(tmp_path):
-    with pytest.raises(GeometryError, match=r"^cannot read mesh 'x.foo': unknown file type '.foo'"):
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: cannot read 'x.foo': unknown file type '.foo'"):
         load_surface(b"solid", filename="x.foo")
     with pytest.raises(GeometryError, match="need a filename"):
         load_surface(b"solid")
-    with pytest.raises(GeometryError, match=r"^cannot read mesh 'missing.stl': No such file"):
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: cannot read 'missing.stl': No such file"):
         load_surface(tmp_path / "missing.stl")
-    with pytest.raises(GeometryError, match=r"^cannot read mesh 'x.stl': the file is empty$"):
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: cannot read 'x.stl': the file is empty$"):
         load_surface(b"", filename="x.stl")
-    message = r"^cannot read mesh 'shape.svg': 'svg' is a 2D drawing; use dimension 2$"
+    message = r"^geometry\.mesh: cannot read 'shape.svg': 'svg' is a 2D drawing; use dimension 2$"
     with pytest.raises(GeometryError, match=message):
         load_surface(b"<svg/>", filename="shape.svg")
     with pytest.raises(GeometryError, match="dimension 2 needs an SVG or DXF file"):
@@ -236,12 +236,12 @@ def test_unreadable_sources_name_the_problem(tmp_path):
 
 
 def test_mesh_without_faces_is_rejected():
-    message = r"^cannot read mesh 'points.obj': no mesh found in the file \(is it a valid OBJ file\?\)$"
+    message = r"^geometry\.mesh: cannot read 'points.obj': no mesh found in the file \(is it a valid OBJ file\?\)$"
     with pytest.raises(GeometryError, match=message):
         load_surface(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", filename="points.obj")
-    with pytest.raises(GeometryError, match=r"^mesh 'points' has no faces$"):
+    with pytest.raises(GeometryError, match=r"^'points' has no faces$"):
         mesh_surface(np.eye(3), np.zeros((0, 3), dtype=int), name="points")
-    with pytest.raises(GeometryError, match=r"^cannot read mesh 'empty.stl': no mesh found"):
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: cannot read 'empty.stl': no mesh found"):
         load_surface(b"solid empty\nendsolid empty\n", filename="empty.stl")
 
 
@@ -329,7 +329,7 @@ def test_gltf_path_resolves_its_buffer_file(tmp_path):
         (tmp_path / file_name).write_bytes(content)
     surface = load_surface(tmp_path / "model.gltf")
     assert surface.closed and surface.enclosed_volume() == pytest.approx(_sphere().volume, rel=1e-7)
-    with pytest.raises(GeometryError, match=r"^cannot read mesh 'model.gltf': "):
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: cannot read 'model.gltf': "):
         load_surface(files["model.gltf"], filename="model.gltf")  # bytes alone: no buffer
 
 
@@ -344,6 +344,28 @@ def test_two_bodies_touching_along_a_face_load_as_one_solid_and_the_warning_says
     b = trimesh.creation.box(bounds=[[1, 0, 0], [2, 1, 1]])
     s = load_surface(trimesh.util.concatenate([a, b]).export(file_type="stl"), filename="pair.stl")
     assert s.closed and s.enclosed_volume() == pytest.approx(2.0, rel=1e-14)
-    (warning,) = s.warnings
-    assert "(open on its own: bodies touching along shared faces)" in warning
-    assert "bodies that only touch are solved as one solid" in warning
+    # their pieces' boxes meet only in the shared plane: no overlap can hide there, so nothing is unchecked
+    assert s.warnings == ["bodies touch along shared faces: they are solved as one solid, bonded where they touch"]
+
+
+def test_instances_of_a_scene_merge_their_shared_corners_without_a_warning():
+    # two instances of one box, touching along a face: their coincident corners come from flattening
+    box = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    scene = trimesh.Scene()
+    scene.add_geometry(box, geom_name="box", node_name="a")
+    scene.add_geometry(box, geom_name="box", node_name="b", transform=trimesh.transformations.translation_matrix([1, 0, 0]))
+    surface = load_surface(scene.export(file_type="glb"), filename="pair.glb")
+    assert surface.closed and surface.enclosed_volume() == pytest.approx(2.0, rel=1e-12)
+    assert not any("duplicate vertices" in w for w in surface.warnings), surface.warnings
+
+
+def test_every_mesh_error_names_geometry_mesh_and_placement_errors_their_own_field():
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: 'sheet.obj' encloses no volume: it is flat"):
+        load_surface(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n", filename="sheet.obj")
+    with pytest.raises(GeometryError, match=r"^geometry\.mesh: polygon 'x.svg': loop 0 is not a simple closed curve"):
+        load_surface(b'<svg xmlns="http://www.w3.org/2000/svg" fill="none"><path d="M0 0 L10 2 L10 0 L0 2 Z"/></svg>',
+                     filename="x.svg", dimension=2)
+    with pytest.raises(GeometryError, match=r"^geometry\.scale: 'c.stl': scale must be a finite number > 0, got -1"):
+        load_surface(b"", filename="c.stl", scale=-1.0)
+    with pytest.raises(GeometryError, match=r"^geometry\.transform: 'c.stl': transform must be rigid"):
+        load_surface(b"", filename="c.stl", transform=np.diag([2.0, 1, 1, 1]))

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -45,15 +46,18 @@ from trimesh.resolvers import FilePathResolver, ZipResolver
 from engine.errors import GeometryError
 from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, place
 from engine.geometry.inflate import DEFAULT_MAX_INFLATED, check_zip_container, container_suffix, inflate
-from engine.geometry.polygon import polygon_surface, read_drawing
+from engine.geometry.polygon import drawing_surface
 from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
 from engine.geometry.stitch import stitch_cracks
+from engine.geometry.stl import fix_binary_count
 from engine.geometry.topology import edge_balance, edges
 from engine.geometry.winding import winding_number
 
 MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
 
+# 'field.path: reason', as the service splits engine messages
+_FIELD = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)*: ")
 _COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D; also inside .gz, .bz2, .xz, .zip, .tar"
 # formats that are ZIP archives themselves: their members are inflated by trimesh's loader
 _ZIP_FORMATS = {"3mf", "3dxml"}
@@ -82,16 +86,35 @@ def load_surface(
     transform: rigid [d+1, d+1] homogeneous matrix applied after scaling. Units: whatever the
     file uses times ``scale`` [m]. max_inflated_bytes: cap on what a compressed or archived file
     (.gz, .bz2, .xz, .zip, .tar.*, and the ZIP inside a .3mf) may inflate to
-    (``engine.geometry.inflate.InflateLimitError`` beyond it).
+    (``engine.geometry.inflate.InflateLimitError`` beyond it). Every error message starts with the
+    spec field it concerns: ``geometry.mesh:`` unless it names another (``geometry.scale:``).
     """
+    try:
+        return _load_surface(source, filename, dimension, scale, transform, max_inflated_bytes)
+    except GeometryError as exc:
+        # the CLI prints the message and the service files it under the field it starts with
+        message = str(exc)
+        if not _FIELD.match(message):
+            exc.args = (f"geometry.mesh: {message}",)
+        raise
+
+
+def _load_surface(source, filename, dimension, scale, transform, max_inflated_bytes) -> Surface:
     if dimension not in (2, 3):
-        raise GeometryError(f"dimension must be 2 or 3, got {dimension!r}")
+        raise GeometryError(f"dimension: must be 2 or 3, got {dimension!r}")
+    name = filename or (Path(source).name if isinstance(source, (str, os.PathLike)) else "mesh")
+    for field, placement in (("geometry.scale", (scale, None)), ("geometry.transform", (1.0, transform))):
+        try:  # before reading: a bad placement is no fault of the mesh
+            place(np.zeros((1, dimension)), *placement, name)
+        except GeometryError as exc:
+            raise GeometryError(f"{field}: {exc}") from None
     if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
         if dimension != 3:
-            raise GeometryError("a trimesh mesh or scene needs dimension 3")
+            raise GeometryError("dimension: a trimesh mesh or scene needs dimension 3")
         name = filename or "mesh"
         scene = trimesh.Scene(source) if isinstance(source, trimesh.Trimesh) else source
-        vertices, faces, notes = _flatten_scene(scene)
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite input is refused by _checked_arrays
+            vertices, faces, notes, meshes = _flatten_scene(scene)
     else:
         name, data, file_type, resolver = _resolve_source(source, filename)
         files = [(name, data, file_type)]
@@ -100,25 +123,32 @@ def load_surface(
         elif file_type in _ZIP_FORMATS:
             check_zip_container(name, data, max_inflated_bytes)
         if dimension == 2:
-            loops, notes = read_drawing(*files[0])
-            surface = polygon_surface(loops, scale=scale, transform=transform, name=name)
-            surface.warnings[:0] = notes
-            return surface
+            return drawing_surface(*files[0], scale=scale, transform=transform)
         if file_type in path_formats():
-            raise GeometryError(
-                f"cannot read mesh '{name}': '{file_type}' is a 2D drawing; use dimension 2"
-            )
-        vertices, faces, notes = _flatten_scenes([_read_scene(n, d, t, resolver) for n, d, t in files])
+            raise GeometryError(f"cannot read '{name}': '{file_type}' is a 2D drawing; use dimension 2")
+        notes, read = [], []
+        for n, d, t in files:
+            if t == "stl":
+                d, fixes = fix_binary_count(n, d)
+                notes += fixes
+            read.append((n, d, t))
+        # trimesh computes normals of whatever it reads: non-finite input is refused by _checked_arrays
+        with np.errstate(invalid="ignore", over="ignore"):
+            vertices, faces, found, meshes = _flatten_scenes([_read_scene(n, d, t, resolver) for n, d, t in read])
+        notes += found
         if len(vertices) == 0:
             raise GeometryError(
-                f"cannot read mesh '{name}': no mesh found in the file"
-                f" (is it a valid {files[0][2].upper()} file?)"
+                f"cannot read '{name}': no mesh found in the file (is it a valid {files[0][2].upper()} file?)"
             )
     # STL stores every facet with its own three corners: merging them is the format's normal case,
-    # not news for the user (issue 18); other formats share vertices, so merges there are reported
+    # not news for the user (issue 18). Nor are merges where several meshes (instances of a scene,
+    # files of an archive) were combined: their corners coincide where the parts meet, and the
+    # combined numbering is this loader's, not the input's. A single mesh of another format shares
+    # its vertices, so merges there are reported.
     stl = not isinstance(source, (trimesh.Trimesh, trimesh.Scene)) and all(
         t in ("stl", "stl_ascii") for _, _, t in files)
-    surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name, report_merges=not stl)
+    surface = mesh_surface(vertices, faces, scale=scale, transform=transform, name=name,
+                           report_merges=not stl and meshes == 1)
     surface.warnings[:0] = notes
     return surface
 
@@ -192,7 +222,7 @@ def _resolve_source(source, filename: str | None):
         try:
             data = path.read_bytes()
         except OSError as exc:
-            raise GeometryError(f"cannot read mesh '{name}': {exc.strerror or exc}") from None
+            raise GeometryError(f"cannot read '{name}': {exc.strerror or exc}") from None
         resolver = FilePathResolver(str(path))  # GLTF buffers, OBJ materials beside the file
     else:
         raise GeometryError(f"a mesh source must be a path or bytes, got {type(source).__name__}")
@@ -204,9 +234,9 @@ def _resolve_source(source, filename: str | None):
     if not matches:
         suffix = Path(name).suffix
         reason = f"unknown file type '{suffix}'" if suffix else "the file name has no extension"
-        raise GeometryError(f"cannot read mesh '{name}': {reason} (formats: {_COMMON_FORMATS}, ...)")
+        raise GeometryError(f"cannot read '{name}': {reason} (formats: {_COMMON_FORMATS}, ...)")
     if len(data) == 0:
-        raise GeometryError(f"cannot read mesh '{name}': the file is empty")
+        raise GeometryError(f"cannot read '{name}': the file is empty")
     return name, data, max(matches, key=len), resolver
 
 
@@ -223,10 +253,10 @@ def _unpack(name: str, data: bytes, dimension: int, limit: int):
     if not files:
         inside = ", ".join(sorted(members)[:5]) or "nothing"
         kind = "drawing (svg, dxf)" if dimension == 2 else "mesh file"
-        raise GeometryError(f"cannot read mesh '{name}': no {kind} inside (found: {inside}); a compressed file "
+        raise GeometryError(f"cannot read '{name}': no {kind} inside (found: {inside}); a compressed file "
                             "must keep the mesh's own suffix, e.g. part.stl.gz")
     if dimension == 2 and len(files) > 1:
-        raise GeometryError(f"cannot read drawing '{name}': {len(files)} drawings inside; upload one")
+        raise GeometryError(f"cannot read '{name}': {len(files)} drawings inside; upload one")
     return files, ZipResolver({k: io.BytesIO(v) for k, v in members.items()})
 
 
@@ -242,26 +272,29 @@ def _read_scene(name: str, data: bytes, file_type: str, resolver) -> trimesh.Sce
     except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file to the user
         # trimesh's own exceptions name its internals (StopIteration, KeyError: 'y'), not the problem
         what = f"{file_type.upper()} file"
-        raise GeometryError(f"cannot read mesh '{name}': {describe_error(exc, what)}"
+        raise GeometryError(f"cannot read '{name}': {describe_error(exc, what)}"
                             f"{_HINTS.get(file_type, '')}") from None
 
 
-def _flatten_scenes(scenes: list[trimesh.Scene]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _flatten_scenes(scenes: list[trimesh.Scene]) -> tuple[np.ndarray, np.ndarray, list[str], int]:
     """The mesh instances of several scenes (the files of an archive) as one surface."""
     if len(scenes) == 1:
         return _flatten_scene(scenes[0])
     parts = [_flatten_scene(s) for s in scenes]
-    notes = sorted({n for _, _, ns in parts for n in ns if not n.startswith("combined")})
-    found = [(v, f) for v, f, _ in parts if len(v)]
+    notes = sorted({n for _, _, ns, _ in parts for n in ns if not n.startswith("combined")})
+    found = [(v, f) for v, f, _, _ in parts if len(v)]
+    meshes = sum(m for _, _, _, m in parts)
     if not found:
-        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes, meshes
     offsets = np.cumsum([0] + [len(v) for v, _ in found[:-1]])
     notes.append(f"combined {len(found)} mesh files of the archive into one surface")
-    return np.concatenate([v for v, _ in found]), np.concatenate([f + o for (_, f), o in zip(found, offsets)]), notes
+    faces = np.concatenate([f + o for (_, f), o in zip(found, offsets)])
+    return np.concatenate([v for v, _ in found]), faces, notes, meshes
 
 
-def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Mesh instances of a scene in world coordinates: (vertices [m, 3], faces [k, 3], notes)."""
+def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+    """Mesh instances of a scene in world coordinates: (vertices [m, 3], faces [k, 3], notes,
+    number of instances)."""
     vertices, faces, skipped, count = [], [], set(), 0
     for node in scene.graph.nodes_geometry:
         matrix, geometry_name = scene.graph[node]
@@ -285,8 +318,8 @@ def _flatten_scene(scene: trimesh.Scene) -> tuple[np.ndarray, np.ndarray, list[s
     if len(vertices) > 1:
         notes.append(f"combined {len(vertices)} mesh instances of the scene into one surface")
     if not vertices:
-        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes
-    return np.concatenate(vertices), np.concatenate(faces), notes
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), notes, 0
+    return np.concatenate(vertices), np.concatenate(faces), notes, len(vertices)
 
 
 # --- validation ---------------------------------------------------------------------------------
@@ -297,23 +330,23 @@ def _checked_arrays(vertices, faces, name: str) -> tuple[np.ndarray, np.ndarray]
         vertices = np.array(vertices, dtype=np.float64)
         faces = np.array(faces, dtype=np.int64)
     except (TypeError, ValueError) as exc:
-        raise GeometryError(f"mesh '{name}': vertices and faces must be numeric arrays ({exc})") from None
+        raise GeometryError(f"'{name}': vertices and faces must be numeric arrays ({exc})") from None
     if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise GeometryError(f"mesh '{name}': vertices must have shape [m, 3], got {list(vertices.shape)}")
+        raise GeometryError(f"'{name}': vertices must have shape [m, 3], got {list(vertices.shape)}")
     faces = faces.reshape(-1, 3) if faces.size == 0 else faces
     if faces.ndim != 2 or faces.shape[1] != 3:
-        raise GeometryError(f"mesh '{name}': faces must have shape [k, 3], got {list(faces.shape)}")
+        raise GeometryError(f"'{name}': faces must have shape [k, 3], got {list(faces.shape)}")
     if len(faces) == 0:
-        raise GeometryError(f"mesh '{name}' has no faces")
+        raise GeometryError(f"'{name}' has no faces")
     bad = int((~np.isfinite(vertices).all(axis=1)).sum())
     if bad:
         raise GeometryError(
-            f"mesh '{name}': {bad} of the {len(vertices)} vertices {'has' if bad == 1 else 'have'}"
+            f"'{name}': {bad} of the {len(vertices)} vertices {'has' if bad == 1 else 'have'}"
             " non-finite coordinates (NaN or infinity)"
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise GeometryError(
-            f"mesh '{name}': face vertex indices must lie in [0, {len(vertices) - 1}],"
+            f"'{name}': face vertex indices must lie in [0, {len(vertices) - 1}],"
             f" found {faces.min()}..{faces.max()}"
         )
     return vertices, faces
@@ -322,7 +355,7 @@ def _checked_arrays(vertices, faces, name: str) -> tuple[np.ndarray, np.ndarray]
 def _require_faces(faces: np.ndarray, name: str) -> np.ndarray:
     if len(faces) == 0:
         raise GeometryError(
-            f"mesh '{name}' encloses no volume: no faces are left after removing degenerate"
+            f"'{name}' encloses no volume: no faces are left after removing degenerate"
             " and cancelling faces"
         )
     return faces

@@ -49,7 +49,8 @@ Limitations, stated rather than faked:
 - Open surfaces (``closed`` False) are returned unchanged: their inside test is the winding
   number, for which a double cover already reads as inside.
 - A shell manifold3d rejects (``status`` not ``NoError``) cannot be tested; if its bounding box
-  meets another shell's, it is left as it is, with a warning that says so.
+  shares a volume with another shell's, it is left as it is, with a warning that says so (boxes
+  that meet only in a face, as those of bodies touching along a plane, cannot hide an overlap).
 """
 
 from __future__ import annotations
@@ -77,6 +78,9 @@ _PAIR_CHUNK = 1 << 22
 _APART_CELLS = 128
 # Below this many triangles in a pair, manifold3d's exact test (~0.1 ms) beats that test.
 _APART_MIN_FACES = 2000
+
+# Why manifold3d rejects a piece that is open on its own: it is part of bodies sharing faces or edges.
+_TOUCHING = "open on its own: bodies touching along shared faces"
 
 # Relation of shell i to shell j; _APART: disjoint or nested, not yet known which.
 _DISJOINT, _INSIDE, _CONTAINS, _CROSSING, _APART = 0, 1, 2, 3, 4
@@ -111,13 +115,17 @@ def unite_overlapping_shells(surface: Surface, shell: np.ndarray) -> Surface:
         # A shell manifold3d rejects cannot take part in booleans: its component stays as it is.
         rejected = [s for s in np.nonzero(rebuilt)[0] if solids[s] is None]
         rebuilt &= ~np.isin(component, component[rejected])
-    if solids.rejected:
-        reasons = ", ".join(sorted(set(solids.rejected.values())))
+    unchecked = _unchecked(solids, first, second)
+    if unchecked:
+        reasons = ", ".join(sorted({solids.rejected[s] for s in unchecked}))
         surface.warnings.append(
-            f"could not check {len(solids.rejected)} surface pieces for overlaps with their neighbours"
-            f" ({reasons}); where they overlap others, the overlap counts twice (bodies that only touch are "
-            "solved as one solid)"
+            f"could not check {len(unchecked)} surface pieces for overlaps with their neighbours"
+            f" ({reasons}): where they overlap others, the overlap counts twice; make each body a closed"
+            " surface of its own, or unite them in the modelling program"
         )
+    elif _TOUCHING in solids.rejected.values():
+        # nothing unchecked, but the user may have meant parts in contact, not one part
+        surface.warnings.append("bodies touch along shared faces: they are solved as one solid, bonded where they touch")
     if not rebuilt.any():
         return surface
     depth, parent = _nesting(solids, rebuilt, first, second, relation)
@@ -225,7 +233,7 @@ class _Shells:
                 # a piece open on its own is part of bodies that share faces or edges (two boxes
                 # touching along a face, triangulated differently on each side)
                 alone = edge_balance(local, len(used))[2].any()
-                self.rejected[s] = "open on its own: bodies touching along shared faces" if alone else solid.status().name
+                self.rejected[s] = _TOUCHING if alone else solid.status().name
             self._solid[s] = solid
         return None if s in self.rejected else self._solid[s]
 
@@ -295,6 +303,21 @@ def _relations(shells: _Shells, first: np.ndarray, second: np.ndarray):
         inside, contains = common >= vi - tol, common >= vj - tol
         relation[p] = _CROSSING if inside == contains else (_INSIDE if inside else _CONTAINS)
     return relation, overlap
+
+
+def _unchecked(solids: _Shells, first: np.ndarray, second: np.ndarray) -> list[int]:
+    """The pieces manifold3d rejected whose bounding box shares a volume with a neighbour's.
+
+    Pieces whose boxes meet only in a plane, a line or a point (two bodies touching along a
+    face, each side split into open pieces) cannot overlap in volume: nothing is left unchecked.
+    """
+    if not solids.rejected:
+        return []
+    extent = (solids.upper - solids.lower).max()
+    common = np.minimum(solids.upper[first], solids.upper[second]) - np.maximum(solids.lower[first], solids.lower[second])
+    thick = np.all(common > OVERLAP_TOL * extent, axis=1)
+    near = set(first[thick].tolist()) | set(second[thick].tolist())
+    return sorted(s for s in solids.rejected if s in near)
 
 
 def _settle_apart(shells: _Shells, first: np.ndarray, second: np.ndarray, relation: np.ndarray) -> None:
