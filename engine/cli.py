@@ -287,6 +287,12 @@ def cmd_voxelize(args) -> int:
     return 0
 
 
+def _print_warnings(warnings: list[str]) -> None:
+    """Each warning once on stderr (they are also in the result's /solver attributes)."""
+    for w in dict.fromkeys(warnings):
+        print(f"warning: {w}", file=sys.stderr)
+
+
 def cmd_run(args) -> int:
     from .errors import VoxelasticError
     from .geometry.cache import GeometryCache, default_directory
@@ -326,12 +332,12 @@ def cmd_run(args) -> int:
         path = write_result(result, args.output)
     except (VoxelasticError, _NoRoom) as exc:  # bad input, a limit, a method not available yet, no room
         bar.close(failed=True)
+        _print_warnings(getattr(exc, "warnings", []))  # what setup noticed often explains the failure
         return _error(str(exc))
     except OSError as exc:  # the disk said no while writing (it had room when checked)
         bar.close(failed=True)
         return _error(f"cannot write the result to '{args.output}': {exc.strerror or exc}")
-    if note:
-        print(f"warning: {note}", file=sys.stderr)
+    _print_warnings(result.solver.warnings if result.solver is not None else [note] if note else [])
     from .peaks import peaks
 
     for place, peak in peaks(result).items():

@@ -20,7 +20,7 @@ import numpy as np
 
 from schemas import JobSpec, parse_job
 
-from .errors import BoundaryError, GeometryError, GridError
+from .errors import BoundaryError, GeometryError, GridError, VoxelasticError
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.containment import in_solid
 from .geometry.fractions import VolumeFractions, volume_fractions
@@ -256,25 +256,32 @@ def run(
     from .analysis import run_analysis
 
     times = dict(geo.stage_times)
-    t = time.perf_counter()
-    progress("discretization", 0.32, {})
-
-    def setup(part: str, share: float) -> None:
-        progress("discretization", 0.32 + 0.08 * min(max(share, 0.0), 1.0), {"part": part})
-
-    if functions is not None and not isinstance(functions, Functions):
-        raise BoundaryError(f"functions: an engine.pipeline.Functions, got {type(functions).__name__}")
-    method = _discretize(spec, geo, functions or Functions(), setup)
-    times["discretization"] = time.perf_counter() - t
-    # The method keeps what it needs of the geometry; the result takes the cell fractions now and
-    # the rest goes before the solve (for the staggered method: its face and edge fractions)
-    result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
     warnings = geo.warnings
-    probes = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
-    outside = None if probes is None else ~in_solid(geo.surface, probes, geo.grid.spacing)
-    del geo
-    t = time.perf_counter()
-    outcome = run_analysis(method, spec.analysis, spec.output, progress)
+    method = None
+    try:
+        t = time.perf_counter()
+        progress("discretization", 0.32, {})
+
+        def setup(part: str, share: float) -> None:
+            progress("discretization", 0.32 + 0.08 * min(max(share, 0.0), 1.0), {"part": part})
+
+        if functions is not None and not isinstance(functions, Functions):
+            raise BoundaryError(f"functions: an engine.pipeline.Functions, got {type(functions).__name__}")
+        method = _discretize(spec, geo, functions or Functions(), setup)
+        times["discretization"] = time.perf_counter() - t
+        # The method keeps what it needs of the geometry; the result takes the cell fractions now and
+        # the rest goes before the solve (for the staggered method: its face and edge fractions)
+        result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
+        probes = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
+        outside = None if probes is None else ~in_solid(geo.surface, probes, geo.grid.spacing)
+        del geo
+        t = time.perf_counter()
+        outcome = run_analysis(method, spec.analysis, spec.output, progress)
+    except VoxelasticError as exc:
+        # what loading and setup noticed often explains the failure (an inverted mesh, bodies the
+        # grid joins): the CLI prints it with the error
+        exc.warnings = list(warnings) + list(getattr(method, "warnings", []))
+        raise
     times["solve"] = time.perf_counter() - t
     result.fields, result.steps = outcome.final, outcome.steps
     result.probe_points = probes

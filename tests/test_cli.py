@@ -107,3 +107,27 @@ def test_voxelize_an_open_mesh_reports_the_fallback(tmp_path):
     # the winding number carves roughly the missing cap out of the ball, no more, no less
     assert full - 1.5 * cap < volume < full - 0.5 * cap
     assert any("winding number" in w for w in result.solver.warnings)
+
+
+def test_run_prints_the_warnings_and_with_an_error_those_of_the_setup(tmp_path):
+    """`run` printed only the outside-probe note: a repaired mesh or a thin solid was said only in the
+    result's attributes, and when the job failed, not at all."""
+    import trimesh
+
+    box = trimesh.creation.box(bounds=[[0, -0.1, -0.1], [1, 0.1, 0.1]])
+    box.invert()  # every face inside out: loading turns them and says so
+    box.export(tmp_path / "bar.stl")
+    spec = {"dimension": 3, "geometry": {"mesh": "bar.stl"}, "grid": {"resolution": 12},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000}, "loads": {"gravity": [0, 0, -9.81]},
+            "boundaries": [{"kind": "displacement", "name": "clamp", "region": {"box": [[-1, -1, -1], [0.01, 1, 1]]},
+                            "value": [0, 0, 0]}]}
+    (tmp_path / "job.json").write_text(json.dumps(spec))
+    done = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(tmp_path / "job.json"), "-o", str(tmp_path / "r.h5")],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "warning: inverted all faces" in done.stderr and "warning: the solid is thin for this grid" in done.stderr
+    spec["boundaries"] = []  # a free body under gravity: refused, after the same warnings
+    (tmp_path / "job.json").write_text(json.dumps(spec))
+    failed = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(tmp_path / "job.json"), "-o", str(tmp_path / "s.h5")],
+                            capture_output=True, text=True, timeout=600)
+    assert failed.returncode == 2 and "error: " in failed.stderr and "warning: inverted all faces" in failed.stderr

@@ -36,7 +36,7 @@ from .fields import StaggeredFields
 from .joined import joined_bodies_warning
 from .multigrid import Multigrid
 from .nitsche import hold_patches, make_surface_operator
-from .operator import MIN_FRACTION, Level, dof_bodies, make_fine_level
+from .operator import Level, dof_bodies, make_fine_level
 from .problem import solves_directly
 from .shares import patch_shares
 
@@ -152,11 +152,8 @@ class StaggeredElasticity(StaggeredFields):
             )
         del points  # setup only (24 bytes per unknown: 0.46 GiB at 256^3), gone before the multigrid's arrays
         self.dof_body = None  # setup only (the loads' moment couples and the modes), 4 bytes per unknown
-        if level.slivers:
-            self.warnings.append(
-                f"{level.slivers} cut-cell control volumes hold less than {MIN_FRACTION:g} of their volume in solid; their "
-                f"weight was raised to {MIN_FRACTION:g} (bounds the conditioning; adds at most that share of a cell's energy)"
-            )
+        # no warning for the control volumes raised to MIN_FRACTION (level.slivers): it bounds the
+        # conditioning, adds at most that share of a cell's energy and asks nothing of the user
         # a one-level hierarchy is the fine level's factorisation: CG then stops after one step
         try:
             self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
