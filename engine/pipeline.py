@@ -317,6 +317,13 @@ def _discretize(spec: JobSpec, geo: Geometry, functions: Functions, progress: Se
 def _slice_cells(surface: Surface, grid: Grid):
     from .geometry.slicing import slice_cells  # only the methods on cut cells load the slicer
 
+    if not surface.closed:  # the slicer's own error named no field and no way out
+        why = next((w.split(":", 1)[1].split(";")[0].strip() for w in surface.warnings
+                    if w.startswith("the surface is not closed:")), "it has holes")
+        raise GeometryError(
+            f"geometry.mesh: the surface is not closed ({why}); the DG method cuts cells into pieces of a closed solid: "
+            "close the mesh in a modelling program, or use method.kind 'staggered', which reads an open surface by its "
+            "generalized winding number")
     return slice_cells(surface, grid)
 
 

@@ -149,3 +149,22 @@ def test_velocity_is_a_field_of_dynamic_runs_only(method, tmp_path):
     spec.update(analysis={"kind": "static"})
     with pytest.raises(SpecError, match=r"output.fields.1: 'velocity' needs analysis.kind 'dynamic'"):
         parse_job(spec)
+
+
+def test_dg_on_an_open_surface_names_the_mesh_and_the_way_out():
+    """The slicer's own error ("slice_cells: the surface is not closed; hex slicing needs a watertight
+    mesh") named no field and no fix, while the staggered method runs the same mesh."""
+    import trimesh
+
+    from engine import simulate
+    from engine.errors import GeometryError
+    from engine.geometry.cache import GeometryCache
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.update_faces(sphere.triangles_center[:, 2] < 0.8)  # a hole over the top
+    spec = {"dimension": 3, "geometry": {"mesh": "s.stl"}, "grid": {"resolution": 6}, "method": {"kind": "dg", "degree": 1},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3},
+            "boundaries": [{"kind": "displacement", "name": "c", "region": {"all": True}, "value": [0, 0, 0]}]}
+    with pytest.raises(GeometryError, match=r"^geometry.mesh: the surface is not closed \(\d+ edges without a matching "
+                                            r"opposite edge .*use method.kind 'staggered'"):
+        simulate(spec, sphere.export(file_type="stl"), filename="s.stl", cache=GeometryCache(None))
