@@ -62,3 +62,26 @@ def test_a_core_hinged_to_its_cavity_wall_is_named_in_the_singular_error():
     with pytest.raises(SolverError, match=r"singular .*; here 2 separate bodies of the mesh share grid cells .* use "
                                           r"method.kind 'dg'"):
         _warnings(trimesh.util.concatenate([outer, cavity, core]), 1.0 / 16, clamp=((-1, -1, -1), (1, 1, -0.45)))
+
+
+def test_bodies_meeting_at_a_corner_are_named_when_the_solve_stalls():
+    """Two bars touching corner to corner, the far one loaded: joined through one cell's terms, it is
+    nearly free and CG stalls; the error blamed the tolerance ("may be below what this precision
+    resolves")."""
+    import pytest
+
+    from engine import simulate
+    from engine.geometry.cache import GeometryCache
+    from engine.solvers.linear import SolverError
+
+    a = trimesh.creation.box(bounds=[[0, -0.1, -0.1], [0.5, 0.1, 0.1]])
+    b = trimesh.creation.box(bounds=[[0.5, 0.1, 0.1], [1.0, 0.3, 0.3]])
+    spec = {"dimension": 3, "geometry": {"mesh": "m.stl"}, "grid": {"resolution": 16, "padding": 1},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000}, "loads": {"gravity": [0, 0, -9.81]},
+            "boundaries": [{"kind": "displacement", "name": "clamp", "region": {"box": [[-0.1, -0.5, -0.5], [0.05, 0.5, 0.5]]},
+                            "value": [0, 0, 0]}]}
+    with pytest.raises(SolverError) as caught:
+        simulate(spec, trimesh.util.concatenate([a, b]).export(file_type="stl"), filename="m.stl",
+                 cache=GeometryCache(None))
+    assert "here 2 separate bodies of the mesh share grid cells" in str(caught.value)
+    assert "tolerance may be below" not in str(caught.value)

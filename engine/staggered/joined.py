@@ -23,6 +23,7 @@ from ..grid import Grid
 from .operator import Level
 
 MAX_BODIES = 500  # beyond this many separate solids (a scan's specks) the check is skipped
+JOINED = "separate bodies of the mesh share grid cells"  # how the warning is found again
 
 
 def joined_bodies_warning(surface: Surface, level: Level, grid: Grid) -> list[str]:
@@ -65,7 +66,7 @@ def joined_bodies_warning(surface: Surface, level: Level, grid: Grid) -> list[st
     i = int(np.argmin(gap))
     near = ", ".join(f"{c:.4g}" for c in 0.5 * (points[a][i] + points[b][nearest[i]]))
     return [
-        f"{len(bodies)} separate bodies of the mesh share grid cells (h = {h:.4g} m), e.g. near ({near}) m: the "
+        f"{len(bodies)} {JOINED} (h = {h:.4g} m), e.g. near ({near}) m: the "
         "staggered method joins bodies that lie within a cell of each other into one solid there (bonded where they "
         "touch, and also across a gap narrower than a cell); if they should stay apart, refine the grid until each "
         "gap spans more than a cell, or use method.kind 'dg', which keeps the bodies apart"
