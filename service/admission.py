@@ -131,7 +131,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     which runs this in a child process with memory and time limits.
     """
     from engine.errors import VoxelasticError
-    from engine.geometry.inflate import InflateLimitError
+    from engine.geometry.inflate import ExtendedHeaderTooLarge, InflateLimitError
     from engine.devices import check_arch
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
@@ -169,7 +169,8 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
         else:
             surface, _ = load_geometry(spec, None)
     except InflateLimitError as exc:
-        raise Rejected(413, [_error(["body", "mesh"], f"{exc} (VOXELASTIC_MAX_INFLATED_BYTES)", "too_large")]) from None
+        setting = "" if isinstance(exc, ExtendedHeaderTooLarge) else " (VOXELASTIC_MAX_INFLATED_BYTES)"
+        raise Rejected(413, [_error(["body", "mesh"], f"{exc}{setting}", "too_large")]) from None
     except VoxelasticError as exc:
         source = ["body", "mesh"] if uses_mesh else ["body", "spec", "geometry", "polygon"]
         raise Rejected(422, [_engine_error(str(exc), source)]) from None
@@ -188,6 +189,10 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     try:
         grid = make_grid(*surface.bounds, cell_size=g.cell_size, resolution=g.resolution, padding=g.padding,
                          max_cells=settings.max_cells)
+    except VoxelasticError as exc:
+        raise Rejected(422, [_engine_error(str(exc))]) from None
+    try:  # the method's own limits: the values its solve precision holds
+        method_entry(spec.method.kind).check_job(spec, grid)
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
     need = estimate_memory(grid, spec.method, surface)
@@ -213,7 +218,7 @@ def _check_files(spec_path: str, mesh_path: str | None, mesh_filename: str | Non
 def admit(spec_text: str | bytes, mesh: bytes | None, mesh_filename: str | None, settings: Settings) -> Admitted:
     """:func:`check_submission` in a child process limited to ``admission_memory_bytes`` of address
     space and ``admission_time_limit`` seconds; raises :class:`Rejected` for everything it refuses."""
-    from .sandbox import SandboxCrashed, SandboxMemory, SandboxTimeout, run_limited
+    from .sandbox import SandboxBusy, SandboxCrashed, SandboxMemory, SandboxTimeout, run_limited
 
     scratch = Path(settings.data_dir) / "admission"
     scratch.mkdir(parents=True, exist_ok=True)
@@ -242,7 +247,7 @@ def admit(spec_text: str | bytes, mesh: bytes | None, mesh_filename: str | None,
             log.warning("admission check of %s died: %s", mesh_filename, exc.detail)
             raise Rejected(422, [_error(["body", "mesh"], "the mesh could not be read: its reader stopped "
                                         "(a damaged file, or one too large to read within this server's limits)")]) from None
-        except Rejected:
+        except (Rejected, SandboxBusy):  # SandboxBusy: the server's load, not the input (503)
             raise
         except Exception:  # noqa: BLE001 - whatever the input made the check raise, it is still a 4xx
             log.exception("admission check of %s raised", mesh_filename)

@@ -40,6 +40,7 @@ from datetime import timedelta
 from celery import Celery
 from celery.exceptions import SoftTimeLimitExceeded
 from celery.signals import worker_ready, worker_shutting_down
+from sqlalchemy.exc import SQLAlchemyError
 
 from .settings import Settings, get_settings
 
@@ -86,6 +87,7 @@ class _Runtime:
         self.store = JobStore(settings.db_url)
         self.storage = Storage(settings.data_dir)
         self.supervisor = Supervisor(self.store, self.storage, settings, name=f"celery@{socket.gethostname()}:{os.getpid()}")
+        self.supervisor.passthrough = (SoftTimeLimitExceeded,)  # failed by run_job, naming Celery's limit
 
 
 _runtime: _Runtime | None = None
@@ -106,9 +108,23 @@ app = make_celery(get_settings())
 @app.task(name=TASK_NAME, bind=True)
 def run_job(self, job_id: str) -> str | None:
     """Claim ``job_id`` and run it to its end (retrying on this worker while attempts last)."""
+    rt = runtime()
+    try:
+        return _run(rt, job_id)
+    except SQLAlchemyError:
+        # the job table failed where the supervisor could not record it (it has stopped the job's
+        # process): the row is queued, or running with a heartbeat going stale. A message sent for
+        # when it is stale takes it over; without one a queued row would wait for a worker restart
+        delay = rt.settings.heartbeat_stale_after + 5
+        log.warning("job %s: the job table is unavailable; sending the job again in %g s", job_id, delay,
+                    exc_info=True)
+        app.send_task(TASK_NAME, args=[job_id], countdown=delay)
+        return None
+
+
+def _run(rt: _Runtime, job_id: str) -> str | None:
     from .worker import stale_after
 
-    rt = runtime()
     job = rt.store.take_over(job_id, stale_after(rt.settings), rt.settings.max_attempts)
     if job is None:
         log.info("job %s: nothing to do (not queued, or running elsewhere)", job_id)

@@ -5,6 +5,7 @@ Route handlers stay thin; everything that decides something lives here or in the
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -16,6 +17,8 @@ from .settings import Settings
 from .storage import Storage, display_name, new_job_id
 from .store import Job, JobStore, request_hash, scoped_key, utcnow
 
+log = logging.getLogger("voxelastic.jobs")
+
 
 class QueueFull(Exception):
     """Too many queued jobs; ``retry_after`` is a guess of when a slot frees up [s]."""
@@ -26,7 +29,9 @@ class QueueFull(Exception):
 
 
 class QueueUnavailable(Exception):
-    """The broker refused the job (Celery backend)."""
+    """The broker refused the job (Celery backend); nothing of the submission was kept."""
+
+    retry_after = 30  # seconds: a broker that restarts is back in about this long
 
 
 @dataclass
@@ -93,15 +98,27 @@ def submit(
             if not is_storage_fault(exc):
                 raise
             raise rejection(exc, "the uploaded mesh") from None
-    stored, created = store.create(job, shown_key=idempotency_key)
+    try:
+        stored, created = store.create(job, shown_key=idempotency_key)
+    except BaseException:  # the job table unavailable (503 by the app's handler): no orphaned mesh
+        storage.delete(job.id)
+        raise
     if not created:  # lost a race with the same Idempotency-Key
         storage.delete(job.id)
         return Submitted(stored, False)
     try:
         queue.enqueue(job.id)
     except Exception as exc:
-        store.fail_queued(job.id, f"the job queue is unavailable: {type(exc).__name__}: {exc}", "internal")
-        raise QueueUnavailable(f"the job queue is unavailable ({type(exc).__name__}); the job was not queued") from exc
+        log.warning("job %s: the broker refused it (%s: %s); its row and mesh are removed", job.id,
+                    type(exc).__name__, exc)
+        # "not queued" must mean nothing was kept: no failed row in the tenant's list, no stored mesh,
+        # and a retry with the same Idempotency-Key makes a new job. Failed first, so the counters
+        # (submitted = finished + live) stay consistent; then deleted
+        store.fail_queued(job.id, "the job queue is unavailable; the job was not queued", "internal")
+        store.delete(job.id)
+        storage.delete(job.id)
+        raise QueueUnavailable("the job queue is unavailable: the job was not queued and nothing of it was kept; "
+                               f"submit it again in {QueueUnavailable.retry_after} s") from None
     return Submitted(stored, True)
 
 

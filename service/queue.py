@@ -21,7 +21,7 @@ from typing import Any, Protocol
 
 from .settings import Settings
 from .storage import Storage
-from .store import JobStore
+from .store import Job, JobStore
 from .worker import Supervisor, WorkerStartError
 
 log = logging.getLogger("voxelastic.queue")
@@ -99,12 +99,18 @@ class LocalQueue:
             sup.ensure_process((self.settings.arch, self.settings.precision))
         except WorkerStartError as exc:
             log.error("%s: %s", sup.name, exc)
+        # attempts whose end could not be written yet (the job table unavailable), with the error;
+        # recorded before the slot claims anything else, so no job stays "running" without a worker
+        unsettled: list[tuple[Job, Exception]] = []
         while not self._stopping.is_set():
             self._wake.clear()
+            if unsettled and not self._settle(sup, unsettled):
+                self._wake.wait(IDLE_POLL)
+                continue
             try:
                 job = self.store.claim_next()
             except Exception:  # the database went away for a moment: keep the slot alive
-                log.exception("%s: claiming a job failed", sup.name)
+                log.warning("%s: claiming a job failed (the job table is unavailable)", sup.name, exc_info=True)
                 job = None
             if job is None:
                 self._wake.wait(IDLE_POLL)
@@ -113,12 +119,26 @@ class LocalQueue:
             try:
                 status = sup.run(job)
                 log.info("%s: job %s ended %s", sup.name, job.id, status)
-            except Exception:
-                log.exception("%s: supervising job %s failed", sup.name, job.id)
-                self.store.fail(job.id, job.attempts, "internal error while supervising the job", "internal")
+            except Exception as exc:  # the attempt's end could not be recorded: try again before the next job
+                log.warning("%s: job %s: could not record the end of attempt %d", sup.name, job.id, job.attempts,
+                            exc_info=True)
+                unsettled.append((job, exc))
             if status == "queued":  # its worker was lost: let any idle slot retry it now
                 self._wake.set()
         sup.shutdown()
+
+    @staticmethod
+    def _settle(sup: Supervisor, unsettled: list[tuple[Job, Exception]]) -> bool:
+        """Record the ends of ``unsettled`` attempts (removing those done); False while one fails."""
+        while unsettled:
+            job, exc = unsettled[0]
+            try:
+                status = sup.settle(job, job.attempts, exc)
+            except Exception:
+                return False
+            log.info("%s: job %s ended %s (recorded late)", sup.name, job.id, status)
+            unsettled.pop(0)
+        return True
 
     def enqueue(self, job_id: str) -> None:
         self._wake.set()

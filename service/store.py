@@ -21,7 +21,8 @@ from typing import Any
 
 from sqlalchemy import case, delete, func, select, text, update
 from sqlalchemy.engine import Engine
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import DisconnectionError, IntegrityError, InterfaceError, OperationalError
+from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from sqlalchemy.orm import Session, defer
 
 from .db import CounterRow, JobRow, make_engine
@@ -36,6 +37,10 @@ class JobStatus(str, Enum):
     failed = "failed"  # ``error`` says why: bad input found late, a limit, a lost worker, a bug
     cancelled = "cancelled"  # stopped on request; its worker process was stopped
 
+
+# what SQLAlchemy raises when the database does not answer (down, restarting, SQLite locked past its
+# busy timeout, no pooled connection free): the service's state, which passes, not a bug
+DATABASE_DOWN = (OperationalError, InterfaceError, DisconnectionError, PoolTimeoutError)
 
 TERMINAL = (JobStatus.succeeded.value, JobStatus.failed.value, JobStatus.cancelled.value)
 

@@ -26,6 +26,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import psutil
+from sqlalchemy.exc import SQLAlchemyError
 
 from .faults import ERROR_KIND, describe, is_storage_fault
 from .runner import Task, worker_main
@@ -164,6 +165,8 @@ class Supervisor:
         # why the last worker process could not start (None once one has): /health reports it, so
         # a server whose workers cannot run anything is not "ok" (issue 18: the image lacked libX11)
         self.start_error: str | None = None
+        # exceptions that end an attempt through the caller's own handling (Celery's soft time limit)
+        self.passthrough: tuple[type[BaseException], ...] = ()
 
     def ensure_process(self, key: tuple[str, str]) -> WorkerProcess:
         if self.process is not None and (self.process.key != key or not self.process.alive()):
@@ -193,21 +196,58 @@ class Supervisor:
         """Run the claimed ``job`` (status running) to its end; returns the status it ends in.
 
         "queued" means its worker was lost and the job went back to the queue (attempts left).
+        Whatever goes wrong while supervising (a write to the job table that fails: SQLite locked
+        past its busy timeout, PostgreSQL restarted) stops the worker process and ends the attempt
+        by :meth:`settle`; only when that cannot be recorded either does the exception leave here,
+        and the caller records it later (``settle`` again).
         """
         attempt = job.attempts
         self.job_id = job.id
         try:
-            try:
-                proc = self.ensure_process(runtime_key(job, self.settings))
-            except WorkerStartError as exc:
-                self.store.fail(job.id, attempt, str(exc), "internal")
-                return "failed"
-            self.store.assign_worker(job.id, attempt, proc.label)
-            self.storage.clear_attempts(job.id)
-            proc.send(self._task(job, proc))
-            return self._supervise(job, attempt, proc)
+            return self._run(job, attempt)
+        except self.passthrough:
+            self.discard_process()
+            raise
+        except Exception as exc:
+            self.discard_process()
+            return self.settle(job, attempt, exc)
         finally:
             self.job_id = None
+
+    def _run(self, job: Job, attempt: int) -> str | None:
+        try:
+            proc = self.ensure_process(runtime_key(job, self.settings))
+        except WorkerStartError as exc:
+            self.store.fail(job.id, attempt, str(exc), "internal")
+            return "failed"
+        self.store.assign_worker(job.id, attempt, proc.label)
+        self.storage.clear_attempts(job.id)
+        proc.send(self._task(job, proc))
+        return self._supervise(job, attempt, proc)
+
+    def discard_process(self) -> None:
+        """Kill the worker process and forget it: one interrupted mid-job still has that job's
+        messages ("done" included) in its pipe, which the next job would read as its own."""
+        proc, self.process = self.process, None
+        if proc is not None:
+            proc.kill()
+
+    def settle(self, job: Job, attempt: int, exc: BaseException) -> str | None:
+        """End an attempt whose supervision raised ``exc`` (its process is gone): re-queued per
+        the retry policy when the job table failed (a passing fault), failed otherwise (a bug that
+        a retry would meet again). Raises when the table still cannot be written."""
+        if self.stopping:
+            return self.store.release(job.id, attempt, f"attempt {attempt} interrupted by a server shutdown")
+        if isinstance(exc, SQLAlchemyError):
+            log.warning("%s: job %s, attempt %d: the job table could not be written (%s); its worker process "
+                        "was stopped", self.name, job.id, attempt, type(exc).__name__)
+            note = (f"attempt {attempt}: the job table could not be written while the job ran (database "
+                    "unavailable); its worker process was stopped")
+            return self.store.requeue(job.id, attempt, note, self.settings.max_attempts)
+        log.error("%s: supervising job %s failed", self.name, job.id, exc_info=exc)
+        self.store.fail(job.id, attempt, "internal error while supervising the job; its worker process was stopped",
+                        "internal")
+        return "failed"
 
     def _task(self, job: Job, proc: WorkerProcess) -> Task:
         s = self.settings

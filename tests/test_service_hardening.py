@@ -98,13 +98,13 @@ def test_malformed_specs_are_422_naming_the_field(server):
 @pytest.mark.parametrize(
     "filename, data, expected",
     [
-        ("part.3mf", b"PK\x05\x06" + b"\0" * 18, "cannot read mesh 'part.3mf': it is not a valid 3MF file"),
+        ("part.3mf", b"PK\x05\x06" + b"\0" * 18, "geometry.mesh: cannot read 'part.3mf': it is not a valid 3MF file"),
         ("part.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
-         "cannot read mesh 'part.ply': it is not a valid PLY file"),
-        ("part.gltf", b'{"asset": {"version": "2.0"}, "meshes": [{}]}', "cannot read mesh 'part.gltf': it is not a valid GLTF"),
+         "geometry.mesh: cannot read 'part.ply': it is not a valid PLY file"),
+        ("part.gltf", b'{"asset": {"version": "2.0"}, "meshes": [{}]}', "geometry.mesh: cannot read 'part.gltf': it is not a valid GLTF"),
         ("part.gltf", b'{"asset": {"version": "2.0"}, "meshes": null, "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}]}',
-         "cannot read mesh 'part.gltf': it is not a valid GLTF"),
-        ("part.stl.bz2", b"BZh91AY&SY" + b"\x00" * 40, "cannot read 'part.stl.bz2': it is not a valid bzip2 file"),
+         "geometry.mesh: cannot read 'part.gltf': it is not a valid GLTF"),
+        ("part.stl.bz2", b"BZh91AY&SY" + b"\x00" * 40, "geometry.mesh: cannot read 'part.stl.bz2': it is not a valid bzip2 file"),
     ],
 )
 def test_malformed_meshes_are_422_in_words(server, filename, data, expected):
@@ -156,7 +156,7 @@ def test_decompression_bombs_are_refused_and_the_api_process_stays_small(server)
         err = only_error(post(server.client, cantilever(16), data, name), status)
         timings[name] = time.monotonic() - t
         assert err["loc"] == ["body", "mesh"]
-        assert err["msg"].startswith(f"'{name}' inflates to more than {cap} bytes") and "VOXELASTIC_MAX_INFLATED_BYTES" in err["msg"]
+        assert err["msg"].startswith(f"geometry.mesh: '{name}' inflates to more than {cap} bytes") and "VOXELASTIC_MAX_INFLATED_BYTES" in err["msg"]
     # 39 MB of JSON that is most of a gigabyte as Python objects (a file part: Starlette caps
     # text fields at 1 MB): refused by its size (VOXELASTIC_MAX_SPEC_BYTES) before any parsing
     t = time.monotonic()

@@ -53,6 +53,17 @@ class InflateLimitError(GeometryError):
         self.limit = limit
 
 
+class ExtendedHeaderTooLarge(InflateLimitError):
+    """A tar extended header (pax, GNU long name or link) larger than names and attributes need."""
+
+    def __init__(self, name: str, size: int, cap: int):
+        GeometryError.__init__(
+            self, f"'{name}' holds a tar extended header (pax or GNU long name) of {size} bytes, over the "
+                  f"{cap} bytes a tar may use for a file's name and attributes; this is not a mesh archive"
+        )
+        self.limit = cap
+
+
 def container_suffix(name: str) -> str | None:
     """The compression/archive suffix of ``name`` ('.tar.gz', '.zip', ...), or None for a plain file."""
     lower = name.lower()
@@ -125,6 +136,9 @@ def _unzip(name: str, data: bytes, limit: int) -> dict[str, bytes]:
         if len(infos) > MAX_MEMBERS:
             raise GeometryError(f"cannot read '{name}': {len(infos)} files inside, more than {MAX_MEMBERS}")
         for info in infos:
+            if info.filename in out:  # which of the two was meant cannot be told: refuse, naming it
+                raise GeometryError(f"cannot read '{name}': it holds two files named '{info.filename[:200]}'; "
+                                    "an archive must name each file once")
             with archive.open(info) as stream:
                 member = _read_capped(stream, limit, name, used)
             used += len(member)
@@ -132,25 +146,78 @@ def _unzip(name: str, data: bytes, limit: int) -> dict[str, bytes]:
     return out
 
 
+class _CappedStream:
+    """A read-only stream that raises InflateLimitError once more than ``cap`` bytes came out of it.
+
+    tarfile reads a pax or GNU long-name extended header whole, before any member, with sizes the
+    header declares: counting member contents alone let a 2.3 MB upload inflate 500 MiB there."""
+
+    def __init__(self, raw, cap: int, name: str, limit: int):
+        self.raw, self.cap, self.name, self.limit, self.count = raw, cap, name, limit, 0
+
+    def read(self, size: int = -1) -> bytes:
+        room = self.cap - self.count + 1
+        chunk = self.raw.read(room if size is None or size < 0 else min(size, room))
+        self.count += len(chunk)
+        if self.count > self.cap:
+            raise InflateLimitError(self.name, self.limit)
+        return chunk
+
+
+# Extended headers hold a name (at most PATH_MAX, 4 kB) and a few attributes; tarfile reads one whole
+# and then copies it while decoding, so its size is capped on its own, before it is read
+MAX_EXTENDED_HEADER = 1 << 20
+_EXTENDED = (tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.GNUTYPE_LONGNAME,
+             tarfile.GNUTYPE_LONGLINK)
+
+
+class _BoundedTarInfo(tarfile.TarInfo):
+    _archive_name = "archive"
+
+    def _proc_member(self, tarfile_):
+        if self.type in _EXTENDED and self.size > MAX_EXTENDED_HEADER:
+            raise ExtendedHeaderTooLarge(self._archive_name, self.size, MAX_EXTENDED_HEADER)
+        return super()._proc_member(tarfile_)
+
+
+# the tar format's own bytes beside the members' contents, allowed on top of the cap: per member a
+# 512-byte header, a pax header with its own (small) record and padding; per archive the
+# end-of-archive blocks padded to a 10 kB record, and tarfile's read-ahead of one record
+_TAR_PER_MEMBER = 2048
+_TAR_SLACK = 32 * 1024
+# compressed tar streams by their magic bytes (what tarfile's 'r|*' looks at)
+_TAR_COMPRESSION = ((b"\x1f\x8b", _SINGLE[".gz"]), (b"BZh", _SINGLE[".bz2"]), (b"\xfd7zXZ\x00", _SINGLE[".xz"]))
+
+
 def _untar(name: str, data: bytes, limit: int) -> dict[str, bytes]:
     out: dict[str, bytes] = {}
     used = declared = count = 0
-    # stream mode ('r|*'): one pass, no seeking back; skipping a member still inflates it, so the
+    opener = next((open_ for magic, open_ in _TAR_COMPRESSION if data.startswith(magic)), None)
+    raw = opener(io.BytesIO(data)) if opener else io.BytesIO(data)
+    # every byte the decompressor produces counts (headers, extended headers, padding), not only
+    # what members declare or hold
+    stream = _CappedStream(raw, limit + _TAR_SLACK + _TAR_PER_MEMBER, name, limit)
+    # stream mode ('r|'): one pass, no seeking back; skipping a member still inflates it, so the
     # sizes the headers declare are capped too, which bounds the work as well as the memory
-    with tarfile.open(fileobj=io.BytesIO(data), mode="r|*") as archive:
+    tarinfo = type("_TarInfo", (_BoundedTarInfo,), {"_archive_name": name})
+    with raw, tarfile.open(fileobj=stream, mode="r|", tarinfo=tarinfo) as archive:
         for member in archive:
             count += 1
             if count > MAX_MEMBERS:
                 raise GeometryError(f"cannot read '{name}': more than {MAX_MEMBERS} files inside")
+            stream.cap = limit + _TAR_SLACK + _TAR_PER_MEMBER * (count + 1)  # up to the next member's header
             declared += max(member.size, 0)
             if declared > limit:
                 raise InflateLimitError(name, limit)
             if not member.isfile():
                 continue
-            stream = archive.extractfile(member)
-            if stream is None:
+            content_stream = archive.extractfile(member)
+            if content_stream is None:
                 continue
-            content = _read_capped(stream, limit, name, used)
+            content = _read_capped(content_stream, limit, name, used)
             used += len(content)
+            if member.name in out:  # which of the two was meant cannot be told: refuse, naming it
+                raise GeometryError(f"cannot read '{name}': it holds two files named '{member.name[:200]}'; "
+                                    "an archive must name each file once")
             out[member.name] = content
     return out

@@ -27,7 +27,7 @@ from ..admission import capped_errors
 from ..queue import make_queue
 from ..settings import Settings, get_settings
 from ..storage import Storage
-from ..store import JobStore
+from ..store import DATABASE_DOWN, JobStore
 from .deps import require_token
 from .preview import RenderGate
 from .routes import jobs, system
@@ -152,11 +152,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         detail = capped_errors([_plain(e, exc.body) for e in exc.errors()])
         return JSONResponse({"detail": detail}, status_code=422)
 
+    for unavailable in DATABASE_DOWN:
+        app.add_exception_handler(unavailable, _database_unavailable)
+
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException):
         too_large = _PART_TOO_LARGE.fullmatch(str(exc.detail)) if exc.status_code == 400 else None
         if too_large:
             return JSONResponse({"detail": [_part_too_large(exc, int(too_large.group(1)) * 1024)]}, status_code=413)
+        if exc.status_code == 400 and exc.detail == _INVALID_MULTIPART:
+            return JSONResponse({"detail": [_multipart_error(exc)]}, status_code=400)
         if exc.status_code == 405:
             # Starlette's Allow names the methods of the first route that matched the path only
             # (GET of /jobs/{id}); a client must learn every method the path has (DELETE too)
@@ -166,6 +171,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return await http_exception_handler(request, exc)
 
     return app
+
+
+DATABASE_RETRY_AFTER = 5  # seconds
+
+
+async def _database_unavailable(request: Request, exc: Exception) -> JSONResponse:
+    """503 + Retry-After saying the job table is unavailable, instead of a bare 500 and a traceback."""
+    log.warning("%s %s: the job table is unavailable (%s)", request.method, request.url.path, type(exc).__name__)
+    return JSONResponse({"detail": "the job table is unavailable (the database does not answer); "
+                                   f"retry in {DATABASE_RETRY_AFTER} s"},
+                        status_code=503, headers={"Retry-After": str(DATABASE_RETRY_AFTER)})
 
 
 def _add_head(router: APIRouter) -> None:
@@ -196,6 +212,29 @@ def _part_too_large(exc: Exception, limit: int) -> dict:
            "form; send it as a file part instead (curl -F 'spec=@job.json'; a spec may be up to "
            "VOXELASTIC_MAX_SPEC_BYTES, the mesh is always a file part)")
     return {"loc": ["body", name] if name else ["body"], "msg": msg, "type": "too_large"}
+
+
+_INVALID_MULTIPART = "Invalid multipart data."  # Starlette's words for every multipart parse error
+
+
+def _multipart_error(exc: Exception) -> dict:
+    """The 400 entry for a body the multipart parser refused, saying what and which limit: its own
+    message names neither."""
+    from python_multipart.multipart import DEFAULT_MAX_HEADER_COUNT, DEFAULT_MAX_HEADER_SIZE
+
+    cause = getattr(exc.__context__, "__cause__", None)
+    reason = str(cause) if cause is not None else ""
+    if reason.startswith("Maximum header size exceeded"):
+        msg = (f"a header line of a part of the multipart form is over {DEFAULT_MAX_HEADER_SIZE} bytes, the "
+               "multipart parser's limit; it is usually the file name in Content-Disposition: send a shorter one")
+        return {"loc": ["body"], "msg": msg, "type": "header_too_large"}
+    if reason.startswith("Maximum header count exceeded"):
+        msg = (f"a part of the multipart form has more than {DEFAULT_MAX_HEADER_COUNT} header lines, the multipart "
+               "parser's limit")
+        return {"loc": ["body"], "msg": msg, "type": "too_many_headers"}
+    return {"loc": ["body"], "type": "multipart_invalid",
+            "msg": "the request body is not valid multipart/form-data (a boundary, a part header or the end of "
+                   "the form is malformed)"}
 
 
 def _parsed_part_name(exc: BaseException | None) -> str | None:

@@ -1,4 +1,7 @@
-"""Dependencies of the routes, as ``Annotated`` aliases (``SettingsDep``, ``StoreDep``, ...)."""
+"""Dependencies of the routes, as ``Annotated`` aliases (``SettingsDep``, ``StoreDep``, ...).
+
+All async: FastAPI runs a sync dependency on the shared thread pool, which waiting submissions can
+fill; the job reads go to :mod:`service.api.reads` instead (a status poll must stay prompt)."""
 
 from __future__ import annotations
 
@@ -13,21 +16,22 @@ from ..queue import Queue
 from ..settings import Settings
 from ..storage import JOB_ID_PATTERN, Storage
 from ..store import Job, JobStore, owner_of
+from .reads import read
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_store(request: Request) -> JobStore:
+async def get_store(request: Request) -> JobStore:
     return request.app.state.store
 
 
-def get_storage(request: Request) -> Storage:
+async def get_storage(request: Request) -> Storage:
     return request.app.state.storage
 
 
-def get_queue(request: Request) -> Queue:
+async def get_queue(request: Request) -> Queue:
     return request.app.state.queue
 
 
@@ -53,7 +57,7 @@ def _matches(given: bytes, tokens: list[str]) -> bool:
     return any([hmac.compare_digest(given, t.encode()) for t in tokens])
 
 
-def require_token(
+async def require_token(
     settings: SettingsDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
 ) -> Principal:
     """401 unless no tokens are configured or the request carries one of them as a Bearer token."""
@@ -75,10 +79,10 @@ PrincipalDep = Annotated[Principal, Depends(require_token)]
 JobId = Annotated[str, Path(pattern=JOB_ID_PATTERN, description="Job id (22 URL-safe characters).")]
 
 
-def get_job(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
+async def get_job(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
     """The job named in the path if the caller may see it, else 404 (another tenant's job is absent,
     not forbidden: a 403 would confirm that the id exists)."""
-    job = store.get_owned(job_id, principal.owner, principal.everyone)
+    job = await read(store.get_owned, job_id, principal.owner, principal.everyone)
     if job is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job_id}")
     return job
@@ -87,9 +91,9 @@ def get_job(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
 JobDep = Annotated[Job, Depends(get_job)]
 
 
-def get_job_brief(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
+async def get_job_brief(job_id: JobId, store: StoreDep, principal: PrincipalDep) -> Job:
     """:func:`get_job` without the spec (``Job.spec`` None): for routes that never show it."""
-    job = store.get_owned(job_id, principal.owner, principal.everyone, with_spec=False)
+    job = await read(store.get_owned, job_id, principal.owner, principal.everyone, with_spec=False)
     if job is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job_id}")
     return job

@@ -9,13 +9,17 @@ get 503 with Retry-After.
 
 from __future__ import annotations
 
+import logging
 import os
+import re
 import subprocess
 import sys
 import threading
 from pathlib import Path
 
 from fastapi import HTTPException, status
+
+log = logging.getLogger("voxelastic.preview")
 
 PREVIEW_SECONDS = 120  # rendering the bundled example takes 2-3 s; a huge surface may take longer
 MAX_WAITING = 8
@@ -56,6 +60,27 @@ class RenderGate:
             self.slots.release()
 
 
+class RenderFailed(HTTPException):
+    """503: the picture could not be rendered, the reason in words (no paths, no exception names)."""
+
+    def __init__(self, reason: str):
+        super().__init__(status.HTTP_503_SERVICE_UNAVAILABLE, detail=f"the picture could not be rendered: {reason}")
+
+
+def _reason(code: int, stderr: str) -> str:
+    """What the renderer said, when it said it in words: ``engine.preview`` exits 2 with one line
+    "error: ..." for a result it cannot draw; anything else (a crash, a traceback) is logged and
+    answered without its text, which names server paths and exception classes."""
+    last = (stderr.strip().splitlines() or [""])[-1]
+    if code == 2 and last.startswith("error: ") and not _PATHLIKE.search(last):
+        return last.removeprefix("error: ")
+    log.warning("preview renderer exited with status %s: %s", code, stderr.strip()[-2000:])
+    return f"the renderer stopped (exit status {code}); the server log has the details"
+
+
+_PATHLIKE = re.compile(r"(^|[\s'\"(=])/[^\s]")
+
+
 def _render(result: Path, picture: Path) -> None:
     """Render the picture once, beside the result (cached with it, deleted with it), in a child
     process: VTK's memory and time never land in the API process or a job's worker limits."""
@@ -64,9 +89,11 @@ def _render(result: Path, picture: Path) -> None:
         out = subprocess.run([sys.executable, "-m", "engine.preview", str(result), str(tmp)], capture_output=True,
                              text=True, timeout=PREVIEW_SECONDS)
         if out.returncode != 0 or not tmp.is_file():
-            reason = (out.stderr.strip().splitlines() or ["no output"])[-1]
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=f"the picture could not be rendered: {reason}")
+            raise RenderFailed(_reason(out.returncode, out.stderr))
         os.replace(tmp, picture)
+    except OSError as exc:  # the job's directory went away meanwhile (deleted), or the disk is full
+        log.warning("preview of %s: %s", result.parent.parent.name, exc)
+        raise RenderFailed("the picture could not be stored") from None
     except subprocess.TimeoutExpired:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
                             detail=f"the picture could not be rendered in {PREVIEW_SECONDS} s") from None

@@ -6,12 +6,13 @@ import json
 import re
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Header, HTTPException, Query, Request, Response, UploadFile, status
+from fastapi import APIRouter, Depends, File, Form, Header, HTTPException, Query, Request, Response, UploadFile, status
 from fastapi.responses import FileResponse, StreamingResponse
 from starlette.datastructures import Headers
 from starlette.types import Receive, Scope, Send
 
 from ...admission import Rejected
+from ...sandbox import SandboxBusy
 from ...jobs import QueueFull, QueueUnavailable, Submitted, cancel_or_delete, submit
 from ...queue import Queue
 from ...settings import Settings
@@ -20,6 +21,7 @@ from ...store import IdempotencyConflict, JobStatus, JobStore
 from ..deps import JobBriefDep, JobDep, Principal, PrincipalDep, QueueDep, SettingsDep, StorageDep, StoreDep
 from ..events import job_events, last_seen
 from ..models import JobOut, JobPage, job_json, job_out, output_surface
+from ..preview import RenderFailed
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -33,8 +35,22 @@ _ERRORS = {
 }
 
 
+async def _one_part_each(request: Request) -> None:
+    """422 naming a form field sent more than once: the framework would silently take the last
+    ``mesh`` or ``spec``, and which one the client meant cannot be told. (The form is the one
+    FastAPI has parsed already: Starlette keeps it on the request.)"""
+    form = await request.form()
+    for name in ("spec", "mesh"):
+        count = len(form.getlist(name))
+        if count > 1:
+            raise HTTPException(422, detail=[{
+                "loc": ["body", name], "type": "duplicate",
+                "msg": f"the form has {count} '{name}' parts; send exactly one (which one was meant cannot be told)"}])
+
+
 @router.post(
     "",
+    dependencies=[Depends(_one_part_each)],
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobOut,
     responses={
@@ -42,9 +58,11 @@ _ERRORS = {
         409: {"description": "Idempotency-Key reused for a different submission."},
         413: {"description": "Request body over VOXELASTIC_MAX_UPLOAD_BYTES, a compressed mesh inflating past "
                              "VOXELASTIC_MAX_INFLATED_BYTES, or reading it past VOXELASTIC_ADMISSION_MEMORY_BYTES."},
-        422: {"description": "Invalid spec or mesh, too many facets, grid over the memory limit (field path + reason)."},
+        422: {"description": "Invalid spec or mesh, too many facets, grid over the memory limit, a form field sent "
+                             "twice (field path + reason)."},
         429: {"description": "Queue full; see Retry-After."},
-        503: {"description": "The job queue (broker) is unavailable."},
+        503: {"description": "The job queue (broker) or the job table is unavailable, or too many submissions "
+                             "are being checked; see Retry-After."},
     },
     summary="Submit a job (multipart: spec JSON + mesh file)",
 )
@@ -94,7 +112,12 @@ def _submit(settings: Settings, store: JobStore, storage: Storage, queue: Queue,
         return HTTPException(status.HTTP_429_TOO_MANY_REQUESTS, detail=str(exc),
                              headers={"Retry-After": str(exc.retry_after)})
     except QueueUnavailable as exc:
-        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc))
+        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc),
+                             headers={"Retry-After": str(exc.retry_after)})
+    except SandboxBusy as exc:
+        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(exc.retry_after)},
+                             detail=f"the server is busy checking other submissions (no check slot came free in "
+                                    f"{exc.waited:g} s); nothing was stored: submit again in {exc.retry_after} s")
 
 
 def _spec_text(spec: UploadFile | str, limit: int) -> str | bytes | HTTPException:
@@ -143,7 +166,8 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=_ERRORS, summary="Status, progress, timings, result links")
-def get_job(job: JobDep) -> Response:
+async def get_job(job: JobDep) -> Response:
+    # async, like its dependencies: a poll never waits for the shared thread pool (service.api.reads)
     return Response(job_json(job), media_type="application/json")
 
 
@@ -152,7 +176,7 @@ def get_job(job: JobDep) -> Response:
     responses={**_ERRORS, 200: {"content": {"text/event-stream": {}}, "description": "Progress snapshots until the end."}},
     summary="Server-sent events of a job until it ends",
 )
-def job_event_stream(
+async def job_event_stream(
     request: Request,
     job: JobBriefDep,
     store: StoreDep,
@@ -268,13 +292,20 @@ for _route, (_media, _what) in VIEWER_FILES.items():
                                     "are being rendered (see Retry-After)."}},
     summary="A picture of the result: deformed surface coloured by von Mises, undeformed outline",
 )
-def get_preview(request: Request, job: JobDep, storage: StorageDep) -> FileResponse:
+def get_preview(request: Request, job: JobDep, store: StoreDep, storage: StorageDep) -> FileResponse:
     path = storage.result_file(job.id, ".png")
     if job.status == JobStatus.succeeded.value and not path.is_file():
         if not json.loads(job.spec).get("output", {}).get("surface", True):
             raise HTTPException(status.HTTP_404_NOT_FOUND,
                                 detail=f"job {job.id} has no picture: its output has no surface (output.surface is false)")
-        request.app.state.render_gate.render(storage.result_path(job.id), path)
+        try:
+            request.app.state.render_gate.render(storage.result_path(job.id), path)
+        except RenderFailed:
+            if store.get(job.id, with_spec=False) is None:  # deleted while its picture was rendered
+                raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job.id}") from None
+            raise
+    if not path.is_file() and store.get(job.id, with_spec=False) is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no job {job.id}")
     return _finished_file(job, path, "image/png")
 
 

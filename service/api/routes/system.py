@@ -11,6 +11,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from ... import metrics
 from ..deps import PrincipalDep, QueueDep, StoreDep
 from ..models import Health
+from ..reads import health_check
 
 public = APIRouter(tags=["system"])
 router = APIRouter(tags=["system"])
@@ -32,15 +33,16 @@ def index() -> HTMLResponse:
     responses={503: {"model": Health, "description": "The database or the queue does not answer."}},
     summary="Liveness and readiness: database and queue checked (no authentication)",
 )
-def health(request: Request, store: StoreDep, queue: QueueDep) -> JSONResponse:
+async def health(request: Request, store: StoreDep, queue: QueueDep) -> JSONResponse:
     from engine import __version__
 
+    # on threads of its own: a probe must answer while submissions hold the shared pool
     try:
-        store.ping()
+        await health_check(store.ping)
         database = "ok"
     except Exception as exc:
         database = f"unreachable: {type(exc).__name__}"
-    queue_ok, queue_info = queue.health()
+    queue_ok, queue_info = await health_check(queue.health)
     ok = database == "ok" and queue_ok
     body = Health(status="ok" if ok else "unavailable", database=database, queue=queue_info, version=__version__)
     return JSONResponse(body.model_dump(), status_code=200 if ok else 503)
