@@ -9,12 +9,11 @@ the bodies and where; it cannot tell a gap from a contact, so it says what eithe
 
 from __future__ import annotations
 
-
 import numpy as np
 import scipy.ndimage as ndi
 from scipy.sparse import coo_matrix
-from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ..boundary import area_vectors, subdivided
 from ..geometry.surface import Surface
