@@ -10,7 +10,8 @@ import pytest
 import trimesh
 
 from engine.geometry.fractions import volume_fractions
-from engine.geometry.loading import _shells, mesh_surface
+from engine.geometry.loading import mesh_surface
+from engine.geometry.topology import shells as _shells
 from engine.geometry.shells import _Shells, box_pairs, unite_overlapping_shells
 from engine.geometry.slicing import slice_cells
 from engine.geometry.surface import Surface

@@ -51,7 +51,7 @@ from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
 from engine.geometry.stitch import stitch_cracks
 from engine.geometry.stl import fix_binary_count
-from engine.geometry.topology import edge_balance, edges
+from engine.geometry.topology import edge_balance, edges, manifold_adjacency, shells
 from engine.geometry.winding import winding_number
 
 MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
@@ -430,29 +430,11 @@ def _drop_unused_vertices(vertices: np.ndarray, faces: np.ndarray, warnings: lis
     return vertices[used], (np.cumsum(used) - 1)[faces]
 
 
-def _manifold_adjacency(faces: np.ndarray, n_vertices: int):
-    """Face pairs across edges used by exactly two faces: (face a [p], face b [p], same
-    direction [p] bool: both traverse the edge the same way, so one must be reversed)."""
-    edge, counts, ends = edges(faces, n_vertices)
-    corner = np.argsort(edge, kind="stable")
-    two = np.concatenate([[0], np.cumsum(counts)[:-1]])[counts == 2]
-    c0, c1 = corner[two], corner[two + 1]
-    return c0 // 3, c1 // 3, ends[c0, 0] == ends[c1, 0]
-
-
-def _shells(faces: np.ndarray, n_vertices: int):
-    """(number of shells, shell label per face [k]): faces connected across manifold edges."""
-    fa, fb, same = _manifold_adjacency(faces, n_vertices)
-    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(len(faces), len(faces)))
-    n, label = connected_components(graph, directed=False)
-    return n, label, (fa, fb, same)
-
-
 def _orient_consistently(faces: np.ndarray, n_vertices: int, warnings: list[str]) -> np.ndarray:
     """Reverse faces so that neighbours across manifold edges agree, per connected shell; in
     each shell the orientation held by the majority of its faces is kept."""
     k = len(faces)
-    n_shells, label, (fa, fb, same) = _shells(faces, n_vertices)
+    n_shells, label, (fa, fb, same) = shells(faces, n_vertices)
     if not same.any():
         return faces
     # A spanning tree from a virtual root (node k) linked to one face of every shell; edge
@@ -502,7 +484,7 @@ LONE_SHELL = 2
 def _fill_holes(vertices: np.ndarray, faces: np.ndarray, warnings: list[str]) -> np.ndarray:
     if _open_edges(faces, len(vertices))[0] == 0:
         return faces
-    n_shells, label, _ = _shells(faces, len(vertices))
+    n_shells, label, _ = shells(faces, len(vertices))
     lone = (np.bincount(label, minlength=n_shells) <= LONE_SHELL)[label]
     if lone.all():
         return faces
@@ -545,7 +527,7 @@ def _orient_by_nesting(vertices: np.ndarray, faces: np.ndarray, warnings: list[s
     what ``trimesh.repair.fix_normals`` does -- would turn the cavity of a hollow sphere into a
     second solid ball, and an overall volume check would miss an inverted shell among others.
     """
-    n_shells, label, _ = _shells(faces, len(vertices))
+    n_shells, label, _ = shells(faces, len(vertices))
     order = np.argsort(label, kind="stable")
     members = np.split(order, np.cumsum(np.bincount(label, minlength=n_shells))[:-1])
     volume = np.zeros(n_shells)

@@ -8,6 +8,8 @@ its holes; loading reports them, the winding-number fallback caps them.
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -38,3 +40,22 @@ def rim_edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarra
     keep = net != 0
     pairs, net = pairs[keep], net[keep]
     return np.where((net > 0)[:, None], pairs, pairs[:, ::-1]), np.abs(net)
+
+
+def manifold_adjacency(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face pairs across edges used by exactly two faces: (face a [p], face b [p], same
+    direction [p] bool: both traverse the edge the same way, so one must be reversed)."""
+    edge, counts, ends = edges(faces, n_vertices)
+    corner = np.argsort(edge, kind="stable")
+    two = np.concatenate([[0], np.cumsum(counts)[:-1]])[counts == 2]
+    c0, c1 = corner[two], corner[two + 1]
+    return c0 // 3, c1 // 3, ends[c0, 0] == ends[c1, 0]
+
+
+def shells(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray, tuple]:
+    """(number of shells, shell label per face [k], the adjacency): faces connected across edges that
+    exactly two faces share (a non-manifold edge where two bodies meet joins nothing)."""
+    fa, fb, same = manifold_adjacency(faces, n_vertices)
+    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(len(faces), len(faces)))
+    n, label = connected_components(graph, directed=False)
+    return n, label, (fa, fb, same)

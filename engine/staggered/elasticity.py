@@ -71,6 +71,17 @@ def thin_solid_warning(surface, h: float) -> list[str]:
             "method.kind 'dg' with method.degree 2"]
 
 
+def _joined_cause(exc: SolverError, joined: list[str]) -> SolverError:
+    """``exc`` with the joined-bodies warning as its likely cause (``exc`` itself when there is none):
+    bodies joined through single cells or edges are held by almost nothing there."""
+    if not joined:
+        return exc
+    said = str(exc).split("; the tolerance may")[0]  # not the tolerance's fault here
+    return SolverError(f"{said}; here {joined[0].split(':')[0]}, which joins them through single cells or edges that "
+                       "hold almost nothing: refine the grid until each gap spans more than a cell, or use method.kind "
+                       "'dg'", exc.reason)
+
+
 @dataclass
 class StaggeredElasticity(StaggeredFields):
     """The method on one geometry: built once (level, prescribed DOFs, loads, rigid-mode checks,
@@ -159,13 +170,9 @@ class StaggeredElasticity(StaggeredFields):
             self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
                                        progress=lambda part, share: say(part, 0.5 + 0.5 * share))
         except SolverError as e:
-            if e.reason != "singular" or not joined:
-                raise
             # bodies joined through a cell or an edge hold each other by a hinge (a core in a cavity
             # 2.4 cells wide, touching its wall by one edge's shear term)
-            raise SolverError(f"{e}; here {joined[0].split(':')[0]}, which joins them through single cells or "
-                              "edges that hold nothing firmly: refine the grid until each gap spans more than a cell, or "
-                              "use method.kind 'dg'", "singular") from None
+            raise (_joined_cause(e, joined) if e.reason == "singular" else e) from None
         self.space = _Space(level)
         if not self.dynamic:
             # the face fractions weigh the mass and the rigid modes' projection only: a static or
@@ -388,15 +395,10 @@ class StaggeredElasticity(StaggeredFields):
                 x = start()
                 _, stats = self._cg(self._jacobi).solve(b, x, on_iteration)
         except SolverError as exc:
-            joined = [w for w in self.warnings if JOINED in w]
-            if not joined or exc.reason == "cap":
-                raise
             # bodies joined through a point or an edge of the grid are nearly free: the solve stalls
             # (two bodies touching at a point: "stagnated at relative residual 1.53") for no fault of the tolerance
-            said = str(exc).split("; the tolerance may")[0]  # not the tolerance's fault here
-            raise SolverError(f"{said}; here {joined[0].split(':')[0]}, which joins them through single cells or edges "
-                              "that hold almost nothing: refine the grid until each gap spans more than a cell, or use "
-                              "method.kind 'dg'", exc.reason) from None
+            joined = [w for w in self.warnings if JOINED in w]
+            raise (_joined_cause(exc, joined) if exc.reason != "cap" else exc) from None
         # a true residual the restarts left above rtol (within the solver's slack) goes in the report
         self.warnings.extend(w for w in stats.warnings if w not in self.warnings)
         u = x.to_numpy().astype(np.float64, copy=False)

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from ..boundary import area_vectors, subdivided
 from ..geometry.surface import Surface
-from ..geometry.topology import edges
+from ..geometry.topology import shells
 from ..grid import Grid
 from .operator import Level
 
@@ -73,21 +73,16 @@ def joined_bodies_warning(surface: Surface, level: Level, grid: Grid) -> list[st
 
 
 def _shells(surface: Surface) -> tuple[int, np.ndarray]:
-    """(count, shell label per face [k]): faces connected across edges (3D) or vertices (2D) that
-    exactly two faces share (a non-manifold edge where two bodies meet does not join them)."""
-    faces = surface.faces
-    n = len(surface.vertices)
+    """(count, shell label per face [k]): triangles joined across manifold edges (3D), segments
+    across vertices two of them share (2D)."""
+    faces, n = surface.faces, len(surface.vertices)
     if surface.dim == 3:
-        edge, counts, _ = edges(faces, n)
-    else:
-        edge = faces.reshape(-1)
-        counts = np.bincount(edge, minlength=n)
-    corner = np.argsort(edge, kind="stable")
+        return shells(faces, n)[:2]
+    counts = np.bincount(faces.reshape(-1), minlength=n)
+    corner = np.argsort(faces.reshape(-1), kind="stable")
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])[counts == 2]
-    per_face = faces.shape[1]
-    a, b = corner[start] // per_face, corner[start + 1] // per_face
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(faces), len(faces)))
-    return connected_components(graph, directed=False)
+    a, b = corner[start] // 2, corner[start + 1] // 2
+    return connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(len(faces),) * 2), directed=False)
 
 
 def _volume_terms(facets: np.ndarray) -> np.ndarray:
