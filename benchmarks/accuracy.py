@@ -1,7 +1,7 @@
 """Run time against error, side by side in one run: voxelastic's methods and the peer (issue 6.1).
 
     .venv/bin/python -m benchmarks accuracy [--quick | --full] [--problems lame,annulus,ball]
-        [--methods staggered,dg1,dg2,p1,p2,p1-stl,p2-stl] [--repeats 3] [--out docs/accuracy]
+        [--methods staggered,dg1,dg2,p1,p2,p1-stl,p2-stl] [--repeats 3] [--out docs/accuracy] [--arch cpu]
 
 Problems and probes: ``verification.problems``. Methods: the staggered method, DG k = 1 and k = 2
 (IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
@@ -63,7 +63,7 @@ PEERS = ("p1", "p2", "p1-stl", "p2-stl")
 CAD_PEERS = ("p1", "p2")
 
 
-def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = True) -> None:
+def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = True, arch: str = "cpu") -> None:
     from engine import simulate
     from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
@@ -75,6 +75,7 @@ def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = Tr
 
     def job() -> dict:
         spec, mesh, functions = p.job(dict(kind), h)
+        spec["solver"] = {**spec.get("solver", {}), "arch": arch}
         with tempfile.TemporaryDirectory() as tmp:
             path = None
             if mesh is not None:
@@ -114,7 +115,7 @@ def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[]
             "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes))}
 
 
-def _peer(problem_name: str, method: str, h: float, queue, warm: bool = True) -> None:
+def _peer(problem_name: str, method: str, h: float, queue, warm: bool = True, arch: str = "cpu") -> None:
     from benchmarks.peer import run_peer
     from verification.problems import problem
 
@@ -131,7 +132,7 @@ def _peer(problem_name: str, method: str, h: float, queue, warm: bool = True) ->
 
 
 def _one(problem_name: str, method: str, h: float, timeout: float, warm: bool = True,
-         max_rss_gib: float | None = None) -> dict:
+         max_rss_gib: float | None = None, arch: str = "cpu") -> dict:
     """One configuration in its own spawned process: cold and (with ``warm``) warm job. A crash, a
     timeout or (with ``max_rss_gib``) a process whose resident memory passes that many GiB -- it is
     killed then -- is a row with ``failed`` saying which."""
@@ -140,7 +141,7 @@ def _one(problem_name: str, method: str, h: float, timeout: float, warm: bool = 
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     target = _peer if method in PEERS else _voxelastic
-    proc = ctx.Process(target=target, args=(problem_name, method, h, q, warm))
+    proc = ctx.Process(target=target, args=(problem_name, method, h, q, warm, arch))
     t0 = time.perf_counter()
     proc.start()
     watched = psutil.Process(proc.pid)
@@ -294,6 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int)
     ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per run")
     ap.add_argument("--out", type=Path, default=Path("docs/accuracy"))
+    ap.add_argument("--arch", default="cpu", help="voxelastic's solver.arch (cpu, cuda); the peer runs on the CPU")
     a = ap.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3 if a.full else 2)
     methods = a.methods.split(",")
@@ -305,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for r in range(repeats):
         for prob, m, h in configs:
-            row = _one(prob, m, h, a.timeout)
+            row = _one(prob, m, h, a.timeout, arch=a.arch)
             row["repeat"] = r
             runs.append(row)
             brief = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()
@@ -315,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = medians(runs)
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "accuracy.json").write_text(json.dumps(
-        {"machine": platform.processor() or platform.machine(), "commit": _commit(), "date": time.strftime("%Y-%m-%d"),
+        {"machine": platform.processor() or platform.machine(), "arch": a.arch, "commit": _commit(), "date": time.strftime("%Y-%m-%d"),
          "repeats": repeats, "medians": rows, "runs": runs}, indent=1, default=float))
     plot(rows, a.out / "accuracy.png")
     text = (f"Displacement (relative L2 at the probes), time to reach the error, warm (a job in a process "

@@ -2,7 +2,7 @@
 geometry cache off, so every job recomputes its geometry); the first job pays Taichi's front end
 and code generation for every kernel it launches, the later ones do not.
 
-    .venv/bin/python -m benchmarks.cold_start [--jobs 3] [--stages]
+    .venv/bin/python -m benchmarks.cold_start [--jobs 3] [--stages] [--arch cpu]
 
 Prints the wall seconds of each job and the first job's extra time over the median of the others.
 Run it as its own process: an earlier job in the same process would warm it.
@@ -25,6 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stages", action="store_true",
                     help="first import what a job imports and initialise Taichi, timed apart, then print each "
                          "job's stage times: where the first job's extra goes")
+    ap.add_argument("--arch", help="solver.arch of the jobs (cpu, cuda, auto); default: the example's")
     args = ap.parse_args(argv)
     out = {}
     if args.stages:
@@ -35,12 +36,14 @@ def main(argv: list[str] | None = None) -> int:
         from engine import runtime
 
         t = time.perf_counter()
-        runtime.init("cpu", "f64")
+        runtime.init(args.arch or "cpu", "f64")
         out["init_s"] = round(time.perf_counter() - t, 3)
     from engine import simulate
     from engine.geometry.cache import GeometryCache
 
     spec = json.loads((EXAMPLES / "cantilever.json").read_text())
+    if args.arch:
+        spec["solver"] = {**spec.get("solver", {}), "arch": args.arch}
     times, stages = [], []
     for _ in range(max(args.jobs, 2)):
         t = time.perf_counter()
