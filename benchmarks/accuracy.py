@@ -295,6 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int)
     ap.add_argument("--timeout", type=float, default=1200.0, help="seconds per run")
     ap.add_argument("--out", type=Path, default=Path("docs/accuracy"))
+    ap.add_argument("--finest", type=int, help="only the N finest sizes per method")
     ap.add_argument("--arch", default="cpu", help="voxelastic's solver.arch (cpu, cuda); the peer runs on the CPU")
     a = ap.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3 if a.full else 2)
@@ -303,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     for prob in a.problems.split(","):
         for m in methods:
             sizes = SIZES[prob].get(m, [])
+            sizes = sizes[-a.finest:] if a.finest else sizes
             configs += [(prob, m, h) for h in (sizes[:QUICK] if a.quick else sizes)]
     runs = []
     for r in range(repeats):
