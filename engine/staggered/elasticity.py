@@ -186,7 +186,11 @@ class StaggeredElasticity(StaggeredFields):
         1/2 - e_a / 2), made in place (temporaries of [DOFs, d] cost seconds at 20 M DOFs)."""
         points = self.level.layout.index_of(self.dof_pos).astype(np.float64)
         points += 0.5
-        points[np.arange(len(self.dof_comp)), self.dof_comp] -= 0.5
+        # the DOFs are numbered in (component, position) order: component a's are one run of rows
+        # (a fancy index over all 20 M DOFs of the 256^3 shell took 0.2-0.9 s, this 0.04-0.1 s)
+        ends = np.searchsorted(self.dof_comp, np.arange(self.dim + 1))
+        for a in range(self.dim):
+            points[ends[a]:ends[a + 1], a] -= 0.5
         points *= self.grid.spacing
         points += np.asarray(self.grid.origin, dtype=np.float64)
         return points

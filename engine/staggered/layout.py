@@ -93,10 +93,13 @@ class TileLayout:
         """Global index [k, d] int32 of the flat positions ``pos`` [k] in kept tiles: that of
         :meth:`indices` at those rows, without the [size, d] array."""
         pos = np.asarray(pos)
-        local = np.stack(np.unravel_index(pos % self.tile_size, (TILE,) * self.dim), axis=1).astype(np.int32)
-        out = self.coords.astype(np.int32)[pos // self.tile_size]
-        out *= TILE
-        out += local
+        tile, local = np.divmod(pos, self.tile_size)
+        # one axis at a time, in the positions' integer type: unravel_index's int64 [k, d]
+        # temporaries were most of the 1.6 s that the 256^3 shell's sample points took
+        out = np.empty((len(pos), self.dim), dtype=np.int32)
+        for a in range(self.dim):
+            stride = TILE ** (self.dim - 1 - a)
+            out[:, a] = self.coords[:, a][tile] * TILE + (local // stride) % TILE
         return out
 
     def load(self, values: BlockSparse) -> np.ndarray:
@@ -186,4 +189,6 @@ def reorder(flat: np.ndarray, order: np.ndarray, tile_size: int) -> np.ndarray:
     """Re-index a flat array [..., size] by ``order`` from :meth:`TileLayout.select`."""
     lead = flat.shape[:-1]
     rows = flat.reshape(lead + (-1, tile_size))
-    return np.ascontiguousarray(rows[..., order, :]).reshape(lead + (-1,))
+    # np.take copies whole tiles: 2-2.5x faster than the fancy index rows[..., order, :] on the
+    # 256^3 shell's [3, 11.9 M] fractions (0.05 -> 0.02 s each once their pages are touched)
+    return np.take(rows, order, axis=-2).reshape(lead + (-1,))
