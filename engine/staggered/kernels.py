@@ -526,6 +526,20 @@ def csr_apply(indptr: ti.types.ndarray(), cols: ti.types.ndarray(), vals: ti.typ
 
 
 @ti.kernel(fastcache=True)
+def segment_products(start: ti.types.ndarray(), w: ti.types.ndarray(), a: ti.types.ndarray(), b: ti.types.ndarray(),
+                     out: ti.types.ndarray()):
+    """out[s, i, j] = sum_t w[t] a[t, i] b[t, j] over the rows t of segment s (start[s] <= t <
+    start[s + 1]; rows sorted by segment), in row order: per-cell sums of the surface operator's
+    point products (``nitsche.py``), one thread per segment (no atomics: the same sums every run)."""
+    for s in range(out.shape[0]):
+        for i, j in ti.ndrange(a.shape[1], b.shape[1]):
+            acc = 0.0
+            for t in range(start[s], start[s + 1]):
+                acc += w[t] * a[t, i] * b[t, j]
+            out[s, i, j] = acc
+
+
+@ti.kernel(fastcache=True)
 def surface_add(mode: ti.template(), slots: ti.types.ndarray(), n: ti.i32, comp: ti.types.ndarray(),
                 pos: ti.types.ndarray(), sx: ti.types.ndarray(), mask: ti.types.ndarray(), dinv: ti.types.ndarray(),
                 c2: float, step: ti.types.ndarray(), x: ti.types.ndarray(), y: ti.types.ndarray()):

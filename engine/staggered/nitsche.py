@@ -43,6 +43,7 @@ from ..boundary import Prescribed, select_patch, surface_quadrature
 from ..errors import BoundaryError
 from ..geometry.surface import Surface
 from ..grid import axis_pairs
+from . import kernels
 from .operator import Level
 from .sampling import _corner_weights, _corners, _unique_rows, renormalised
 
@@ -138,9 +139,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None 
     # stress functional Sig: rows s * nv + v (Voigt: normals, then pairs), columns sample keys
     s_rows, s_keys, s_vals = _stress_rows(level, sources, nv, lam)
     # interpolation of each component at the points, on the active samples, renormalised
-    mass_r, mass_c, mass_v = [], [], []
-    flux_r, flux_c, flux_v = [], [], []
-    pen = []
+    slots = []  # per component: sample keys [cells, 2^d], the slot sums and the (source, cell) pairs
     corners = _corners(d)
     k = len(corners)
     voigt = {a: [(a, a)] + [(d + q, b if p == a else p) for q, (p, b) in enumerate(axis_pairs(d)) if a in (p, b)]
@@ -153,7 +152,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None 
         xi = (x[on] - origin) / h - shift
         base = np.floor(xi).astype(np.int64)
         phi = _corner_weights(xi - base)  # [N, 2^d]
-        cells, cell_of = _unique_rows(base)
+        cells, cell_of, by_cell, cell_begin = _groups(base)
         near = (cells[:, None, :] + corners[None]).reshape(-1, d)
         near_pos = lay.positions(near)
         act = (near_pos >= 0) & level.active[a, np.maximum(near_pos, 0)]
@@ -165,45 +164,45 @@ def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None 
                 "have no displacement sample in the material the grid resolves; refine the grid"
             )
         phi = renormalised(phi, act)
-        sample_key = a * size + near_pos  # [cells * 2^d]
-        # sums over the points of each cell (and of each (source, cell) pair) as products of a
-        # sparse [cells, points] matrix with [points, k] columns: no [points, k, k] temporaries and
-        # index arrays (their chunked bincounts were 2.3 of the 4.6 s this took on the 256^3 shell)
-        by_cell = _grouping(cell_of, len(cells))
-        pair_rows, pair_of = _unique_rows(np.stack([src[on], cell_of], axis=1))
-        by_pair = _grouping(pair_of, len(pair_rows))
+        pair_rows, _, by_pair, pair_begin = _groups(np.stack([src[on], cell_of], axis=1))
         vs = voigt[a]
-        normals = quad.normals[on][:, [j for _, j in vs]]  # [N, len(vs)]
-        gw_on, w_on = gw[on], w[on]
-        # penalty mass: w gamma phi_I phi_J summed per (cell, I, J) slot; flux: w phi_I n_j per
-        # (source, cell) pair and (I, voigt slot)
-        slot_mass = np.empty((len(cells), k, k))
-        slot_flux = np.empty((len(pair_rows), k, len(vs)))
-        for i in range(k):
-            slot_mass[:, i, :] = by_cell(gw_on * phi[:, i]) @ phi
-            slot_flux[:, i, :] = by_pair(w_on * phi[:, i]) @ normals
-        slot_pen = (by_cell(gw_on * quad.values[on, a]) @ phi).ravel()
-        nz = np.nonzero(slot_mass)
-        mass_r.append(sample_key.reshape(-1, k)[nz[0], nz[1]])
-        mass_c.append(sample_key.reshape(-1, k)[nz[0], nz[2]])
-        mass_v.append(slot_mass[nz])
-        nz = np.nonzero(slot_pen)[0]
-        pen.append((sample_key[nz], slot_pen[nz]))
-        nz = np.nonzero(slot_flux)
-        flux_r.append(sample_key.reshape(-1, k)[pair_rows[nz[0], 1], nz[1]])
-        flux_c.append(pair_rows[nz[0], 0] * nv + np.array([v for v, _ in vs])[nz[2]])
-        flux_v.append(slot_flux[nz])
-    # the compact numbering of every DOF the terms touch
-    every = np.unique(np.concatenate(mass_r + flux_r + [s_keys]))
+        # sums over the points of each cell (penalty mass w gamma phi_I phi_J per (cell, I, J) slot,
+        # its load w gamma g_a phi_I per (cell, I)) and of each (source, cell) pair (flux w phi_I n_j
+        # per (pair, I, voigt slot)): a kernel per sum over the points sorted by cell or pair (numpy's
+        # [points, 2^d, 2^d] products and bincounts were 2.3 of the 4.6 s this took on the 256^3 shell)
+        sorted_phi = phi[by_cell]
+        slot_mass = _segment_sums(cell_begin, gw[on[by_cell]], sorted_phi, sorted_phi)
+        slot_pen = _segment_sums(cell_begin, (gw * quad.values[:, a])[on[by_cell]], sorted_phi, np.ones((len(on), 1)))
+        at_pair = on[by_pair]
+        slot_flux = _segment_sums(pair_begin, w[at_pair], phi[by_pair], quad.normals[at_pair][:, [j for _, j in vs]])
+        slots.append((a * size + near_pos.reshape(-1, k), slot_mass, slot_pen[:, :, 0], slot_flux, pair_rows,
+                      np.array([v for v, _ in vs])))
+    # the compact numbering of every DOF the terms touch: the samples of the non-zero slots, found
+    # per cell (2^d keys each) rather than per slot
+    used = [s_keys]
+    for key, slot_mass, _, slot_flux, pair_rows, _ in slots:
+        used += [key[(slot_mass != 0).any(axis=2)], key[pair_rows[:, 1]][(slot_flux != 0).any(axis=2)]]
+    every = np.unique(np.concatenate(used))
     n, m = len(every), len(sources) * nv
     at = lambda key: np.searchsorted(every, key)  # noqa: E731
-    mass = sp.csr_matrix((np.concatenate(mass_v), (at(np.concatenate(mass_r)), at(np.concatenate(mass_c)))), (n, n))
-    flux = sp.csr_matrix((np.concatenate(flux_v), (at(np.concatenate(flux_r)), np.concatenate(flux_c))), (n, m))
+    mass_r, mass_c, mass_v, flux_r, flux_c, flux_v = [], [], [], [], [], []
+    rhs = np.zeros(n)  # load of the values: Phi^T (w gamma P g) - Sig^T h (below)
+    for key, slot_mass, slot_pen, slot_flux, pair_rows, voigt_rows in slots:
+        number = at(key)  # compact number of each cell's samples (only those of non-zero slots are read)
+        nz = np.nonzero(slot_mass)
+        mass_r.append(number[nz[0], nz[1]])
+        mass_c.append(number[nz[0], nz[2]])
+        mass_v.append(slot_mass[nz])
+        nz = np.nonzero(slot_pen)
+        np.add.at(rhs, number[nz], slot_pen[nz])
+        nz = np.nonzero(slot_flux)
+        flux_r.append(number[pair_rows[nz[0], 1], nz[1]])
+        flux_c.append(pair_rows[nz[0], 0] * nv + voigt_rows[nz[2]])
+        flux_v.append(slot_flux[nz])
+    mass = sp.csr_matrix((np.concatenate(mass_v), (np.concatenate(mass_r), np.concatenate(mass_c))), (n, n))
+    flux = sp.csr_matrix((np.concatenate(flux_v), (np.concatenate(flux_r), np.concatenate(flux_c))), (n, m))
     stress = sp.csr_matrix((s_vals, (s_rows, at(s_keys))), (m, n))
-    # load of the values: Phi^T (w gamma P g) - Sig^T h, h_{s, v} = sum_q w_q (P g (x) n)_v, symmetrised
-    rhs = np.zeros(n)
-    for key, val in pen:
-        np.add.at(rhs, at(key), val)
+    # h_{s, v} = sum_q w_q (P g (x) n)_v, symmetrised
     hg = np.zeros(m)
     pg = quad.mask * quad.values
     for a in range(d):
@@ -214,13 +213,29 @@ def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None 
     return SurfaceOperator(comp, pos, mass, flux, stress, rhs)
 
 
-def _grouping(group: np.ndarray, count: int):
-    """For points in groups ``group`` [N] (0 .. count - 1): a function of per-point weights [N]
-    returning the sparse [count, N] matrix that sums weighted points per group (the points of a
-    group in their own order)."""
-    order = np.argsort(group, kind="stable")
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(group, minlength=count))])
-    return lambda weights: sp.csr_matrix((weights[order], order, indptr), shape=(count, len(group)))
+def _groups(index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct rows of integer index [N, d] (N > 0) in the order of ``sampling._unique_rows``,
+    the row of each point [N], the points sorted by row (stable: each row's in their own order)
+    [N] and where each row's points start among them [rows + 1] int32: one sort for all four."""
+    lo = index.min(axis=0)
+    dims = tuple(int(n) for n in index.max(axis=0) - lo + 1)
+    key = np.ravel_multi_index(tuple((index - lo).T), dims)
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    first = np.ones(len(key), dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    row = np.empty(len(key), dtype=np.int64)
+    row[order] = np.cumsum(first) - 1
+    begin = np.append(np.flatnonzero(first), len(key)).astype(np.int32)
+    return np.stack(np.unravel_index(key[first], dims), axis=1) + lo, row, order, begin
+
+
+def _segment_sums(begin: np.ndarray, w: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """[segments, i, j] sums of w a_i b_j over the sorted points of each segment (``_groups``)."""
+    out = np.empty((len(begin) - 1, a.shape[1], b.shape[1]))
+    kernels.segment_products(begin, np.ascontiguousarray(w, dtype=np.float64), np.ascontiguousarray(a, dtype=np.float64),
+                             np.ascontiguousarray(b, dtype=np.float64), out)
+    return out
 
 
 def traction_bound(lam: float, mu: float, d: int) -> float:
