@@ -102,10 +102,11 @@ class TileLayout:
             out[:, a] = self.coords[:, a][tile] * TILE + (local // stride) % TILE
         return out
 
-    def load(self, values: BlockSparse) -> np.ndarray:
-        """A block-sparse array (8^d tiles on the same tile grid) as a flat array on this layout;
-        tiles of ``values`` that are not kept here must be zero (they are dropped)."""
-        out = np.zeros(self.size)
+    def load(self, values: BlockSparse, out: np.ndarray | None = None) -> np.ndarray:
+        """A block-sparse array (8^d tiles on the same tile grid) as a flat array on this layout
+        (written into ``out`` [size], zero, when given); tiles of ``values`` that are not kept here
+        must be zero (they are dropped)."""
+        out = np.zeros(self.size) if out is None else out
         if len(values.coords):
             if values.block != TILE:
                 raise ValueError(f"block-sparse tiles of {values.block} cannot be loaded on a layout of {TILE}")
