@@ -392,14 +392,16 @@ def _check_overlap(a: Prescribed, pieces: np.ndarray, b: Prescribed, d: int) -> 
     )
 
 
-def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def surface_quadrature(facets: np.ndarray, spacing: float,
+                       centroids: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
     as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
 
     Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided by edge midpoints until none
     is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
-    degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates. Zero-area
-    pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
+    degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
+    ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
+    of each piece). Zero-area pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
     area / length to round-off) and unit outward normals [Q, d].
     """
     facets = np.asarray(facets, dtype=float)
@@ -412,6 +414,8 @@ def surface_quadrature(facets: np.ndarray, spacing: float) -> tuple[np.ndarray, 
     measure, normals = _measure_and_normal(facets)
     keep = measure > 0
     facets, measure, normals = facets[keep], measure[keep], normals[keep]
+    if centroids:
+        return facets.mean(axis=1), measure, normals
     bary, rule = _gauss_rule(d)
     points = np.einsum("qk,fkj->fqj", bary, facets).reshape(-1, d)
     weights = (measure[:, None] * rule[None, :]).ravel()

@@ -361,3 +361,15 @@ def test_boundary_conditions_that_select_nothing_or_are_ambiguous_are_errors():
         boundary_tractions(sphere, far, 0.1, pressure=1.0, traction=[0, 0, 1], name="push")
     with pytest.raises(ValueError, match="push.traction: expected"):
         boundary_tractions(sphere, Ball(np.zeros(3), 5.0), 0.1, traction=[0, 1], name="push")
+
+
+def test_centroid_rule_has_one_point_per_piece_and_exact_first_moments():
+    # the divergence form's gap spreads a uniform traction with it (elasticity._divergence_gap)
+    tri = np.array([[[0.3, -0.2, 1.0], [1.7, 0.4, 0.2], [-0.5, 1.1, 0.6]]])
+    points, weights, normals = surface_quadrature(tri, 0.4, centroids=True)
+    full, full_w, _ = surface_quadrature(tri, 0.4)
+    assert len(full) == 7 * len(points) and len(points) > 1  # the same subdivided pieces
+    assert weights.sum() == pytest.approx(full_w.sum(), rel=1e-14)
+    np.testing.assert_allclose(weights @ points, full_w @ full, rtol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, rtol=0, atol=1e-14)
+    assert (weights * points[:, 0] ** 2).sum() != pytest.approx((full_w * full[:, 0] ** 2).sum(), rel=1e-6)
