@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .clusters import clustered_rule
 from .errors import BoundaryError
 from .geometry.surface import Surface
 from .regions import Region, _subdivide, make_region
@@ -51,6 +52,9 @@ def evaluate(function: PointFunction, points: np.ndarray, shape: tuple[int, ...]
 # A displacement patch covering more than this share of a body's surface gets a warning: usually a
 # half-space whose normal points the wrong way (the normal points out of the region).
 WIDE_HOLD = 0.5
+# with ``merge``, surface pieces at most this times the rule's spacing long are merged into clusters
+# of that side (engine.clusters)
+CLUSTER = 0.25
 
 
 @dataclass
@@ -392,8 +396,8 @@ def _check_overlap(a: Prescribed, pieces: np.ndarray, b: Prescribed, d: int) -> 
     )
 
 
-def surface_quadrature(facets: np.ndarray, spacing: float,
-                       centroids: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = False,
+                       merge: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
     as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
 
@@ -401,7 +405,10 @@ def surface_quadrature(facets: np.ndarray, spacing: float,
     is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
     degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
     ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
-    of each piece). Zero-area pieces are dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
+    of each piece). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
+    grid) are merged into clusters of that side, each with a rule exact to its second moments
+    (:mod:`engine.clusters`): points follow the grid, not the triangle count. Zero-area pieces are
+    dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
     area / length to round-off) and unit outward normals [Q, d].
     """
     facets = np.asarray(facets, dtype=float)
@@ -416,11 +423,17 @@ def surface_quadrature(facets: np.ndarray, spacing: float,
     facets, measure, normals = facets[keep], measure[keep], normals[keep]
     if centroids:
         return facets.mean(axis=1), measure, normals
+    small = np.zeros(len(facets), dtype=bool)
+    if merge:
+        small = np.linalg.norm(facets - np.roll(facets, 1, axis=1), axis=2).max(axis=1) <= CLUSTER * spacing
     bary, rule = _gauss_rule(d)
-    points = np.einsum("qk,fkj->fqj", bary, facets).reshape(-1, d)
-    weights = (measure[:, None] * rule[None, :]).ravel()
-    normals = np.repeat(normals, len(rule), axis=0)
-    return points, weights, normals
+    points = np.einsum("qk,fkj->fqj", bary, facets[~small]).reshape(-1, d)
+    weights = (measure[~small, None] * rule[None, :]).ravel()
+    rule_normals = np.repeat(normals[~small], len(rule), axis=0)
+    if not small.any():
+        return points, weights, rule_normals
+    merged = clustered_rule(facets[small], measure[small], normals[small], CLUSTER * spacing)
+    return tuple(np.concatenate(pair) for pair in zip((points, weights, rule_normals), merged))
 
 
 def boundary_tractions(

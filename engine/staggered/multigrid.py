@@ -104,7 +104,10 @@ class Multigrid:
                 break
             if fine.hold is not None:  # the displacement boundaries, rediscretised on this level
                 lam = coarse.lam * (COARSE_HOLD_LAMBDA if self.robust else 1.0)
-                coarse.set_surface(make_surface_operator(coarse, fine.hold.quadrature(2 * coarse.spacing), lam), fine.hold)
+                # a preconditioner's terms need no per-triangle rule: a scanned mesh's 1.8 M points on
+                # every level were most of its setup (engine.clusters)
+                quad = fine.hold.quadrature(2 * coarse.spacing, merge=True)
+                coarse.set_surface(make_surface_operator(coarse, quad, lam), fine.hold)
             self.levels.append(coarse)
         # coarse tiles around each fine tile's parent (prolongation), fine tiles around each
         # coarse tile's children (restriction)

@@ -74,12 +74,13 @@ class HoldPatches:
     prescribed: tuple[Prescribed, ...]
     pieces: tuple[np.ndarray, ...]
 
-    def quadrature(self, spacing: float) -> HoldQuadrature:
-        """The rule of :func:`engine.boundary.surface_quadrature` at ``spacing`` [m] on every patch."""
+    def quadrature(self, spacing: float, merge: bool = False) -> HoldQuadrature:
+        """The rule of :func:`engine.boundary.surface_quadrature` at ``spacing`` [m] on every patch;
+        ``merge`` for a coarse level's (pieces much smaller than its cells merged into clusters)."""
         parts = []
         for bc, pieces in zip(self.prescribed, self.pieces):
             d = pieces.shape[-1]
-            x, w, n = surface_quadrature(pieces, spacing)
+            x, w, n = surface_quadrature(pieces, spacing, merge=merge)
             mask = np.broadcast_to(bc.mask(d).astype(float), (len(w), d))
             parts.append((x, w, n, mask, bc.values(x)))
         return HoldQuadrature(*(np.concatenate(p) for p in zip(*parts)))
