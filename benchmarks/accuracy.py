@@ -6,26 +6,31 @@
 Problems and probes: ``verification.problems``. Methods: the staggered method, DG k = 1 and k = 2
 (IP, default penalty; 3D only) at several cell sizes h, and the peer (``benchmarks.peer``:
 scikit-fem P1 / P2 on gmsh meshes of the CAD geometry, pyamg CG; with ``p1-stl`` / ``p2-stl`` on
-fTetWild's tetrahedra of the STL voxelastic reads, meshing counted) at several mesh sizes. Every run is a whole job in
+fTetWild's tetrahedra of the STL voxelastic reads, meshing counted) at several mesh sizes; the same
+meshes solved by DOLFINx (``dolfinx-p1``, ``dolfinx-p2``, ``dolfinx-p1-stl``, ``dolfinx-p2-stl``;
+``benchmarks.dolfinx_peer``: PETSc CG + GAMG in Debian's ``python3-dolfinx``, a worker process of
+the system Python, whose start and imports the cold job counts). Every run is a whole job in
 its own spawned process (geometry, discretisation, solve, fields at the probes; no geometry
 cache), twice: the first job is *cold* (what one CLI run costs: Taichi loads and compiles its
 kernels), the second *warm* (what a job costs a service worker that has run one before; kernels
 loaded, nothing of the first job's geometry kept). Wall time is measured around
-``engine.simulate`` / ``run_peer``, imports excluded; the peer runs twice the same way. Peak RSS is
-the process's. Runs are alternated (repeat r of every configuration before repeat r + 1) and
+``engine.simulate`` / ``run_peer`` / ``run_dolfinx``, imports excluded; the peers run twice the same
+way. Peak RSS is the process's (plus the DOLFINx worker's). Runs are alternated (repeat r of every configuration before repeat r + 1) and
 medians reported.
 
 Errors: relative L2 over the 1200 probes of the displacement and of the von Mises stress (of
 the warm job; ``rerun_difference`` says how far the cold job's probe displacements were from it).
 Output under --out: accuracy.json (every run and the medians), accuracy.png (log-log error vs
 time, one line per method and problem; solid warm, dotted cold) and accuracy.md (the tables, warm
-and cold: for each error target, each method's time over the peer's at that error, the faster of
-P1 / P2, interpolated log-log on the measured curves; > 1 means voxelastic is slower).
+and cold: for each error target, each method's time over the peer's at that error, the fastest of
+the peers run on the CAD geometry and of those on the STL, interpolated log-log on the measured
+curves; > 1 means voxelastic is slower).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import multiprocessing as mp
 import platform
@@ -54,13 +59,18 @@ SIZES = {
     "annulus": {"staggered": [1 / 20, 1 / 40, 1 / 80, 1 / 160, 1 / 320], "p1": [0.05, 0.025, 0.0125, 0.00625],
                 "p2": [0.1, 0.05, 0.025, 0.0125]},
 }
+# DOLFINx (benchmarks.dolfinx_peer): the scikit-fem peer's meshes, so its sizes
+for _sizes in (SIZES["lame"], SIZES["ball"]):
+    _sizes.update({f"dolfinx-{m}": _sizes[m] for m in ("p1", "p2", "p1-stl", "p2-stl")})
 QUICK = 3  # sizes per method with --quick
 LABELS = {"staggered": "voxelastic staggered", "dg1": "voxelastic DG k=1", "dg2": "voxelastic DG k=2",
           "p1": "scikit-fem P1", "p2": "scikit-fem P2 (curved)",
-          "p1-stl": "scikit-fem P1 (fTetWild on the STL)", "p2-stl": "scikit-fem P2 (fTetWild on the STL)"}
-# the peer's runs: on the CAD geometry (its best case) and on fTetWild's tetrahedra of the STL
-PEERS = ("p1", "p2", "p1-stl", "p2-stl")
-CAD_PEERS = ("p1", "p2")
+          "p1-stl": "scikit-fem P1 (fTetWild on the STL)", "p2-stl": "scikit-fem P2 (fTetWild on the STL)",
+          "dolfinx-p1": "DOLFINx P1", "dolfinx-p2": "DOLFINx P2 (curved)",
+          "dolfinx-p1-stl": "DOLFINx P1 (fTetWild on the STL)", "dolfinx-p2-stl": "DOLFINx P2 (fTetWild on the STL)"}
+# the peers' runs: on the CAD geometry (their best case) and on fTetWild's tetrahedra of the STL
+PEERS = ("p1", "p2", "p1-stl", "p2-stl", "dolfinx-p1", "dolfinx-p2", "dolfinx-p1-stl", "dolfinx-p2-stl")
+CAD_PEERS = ("p1", "p2", "dolfinx-p1", "dolfinx-p2")
 
 
 def _voxelastic(problem_name: str, method: str, h: float, queue, warm: bool = True, arch: str = "cpu") -> None:
@@ -111,24 +121,33 @@ def _cold_and_warm(p, problem_name: str, method: str, h: float, job: Callable[[]
     return {**warm, "problem": problem_name, "method": method, "h": h,
             "seconds_cold": cold["seconds"], "stages_cold": cold["stages"],
             "rerun_difference": float(np.abs(np.asarray(cold["displacement"]) - u).max() / scale),
-            "peak_rss_gib": peak_rss_bytes() / 2**30,
+            "peak_rss_gib": peak_rss_bytes() / 2**30 + warm.pop("worker_peak_rss_gib", 0.0),
             "error_u": relative_l2(u, p.exact(p.probes)), "error_vm": relative_l2(vm, p.von_mises(p.probes))}
 
 
 def _peer(problem_name: str, method: str, h: float, queue, warm: bool = True, arch: str = "cpu") -> None:
-    from benchmarks.peer import run_peer
+    import contextlib
+
     from verification.problems import problem
 
     # P2 isoparametric (curved faces): on straight facets the lame pressure caps P2 at h^2 (peer.py);
     # "-stl": fTetWild's tetrahedra of the STL voxelastic reads, straight-sided
-    order = int(method[1])
-    geometry = "stl" if method.endswith("-stl") else "curved" if order == 2 else "straight"
+    name = method.removeprefix("dolfinx-")
+    order = int(name[1])
+    geometry = "stl" if name.endswith("-stl") else "curved" if order == 2 else "straight"
+    with contextlib.ExitStack() as stack:
+        if method.startswith("dolfinx-"):  # one DOLFINx worker: started by the cold job, reused by the warm
+            from benchmarks.dolfinx_peer import Worker, run_dolfinx
 
-    def job() -> dict:
-        out = run_peer(problem_name, order, h, geometry=geometry)
-        return {k: v for k, v in out.items() if k not in ("error_u", "error_vm", "problem", "method", "h")}
+            solve = functools.partial(run_dolfinx, worker=stack.enter_context(Worker()))
+        else:
+            from benchmarks.peer import run_peer as solve
 
-    queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job, warm))
+        def job() -> dict:
+            out = solve(problem_name, order, h, geometry=geometry)
+            return {k: v for k, v in out.items() if k not in ("error_u", "error_vm", "problem", "method", "h")}
+
+        queue.put(_cold_and_warm(problem(problem_name), problem_name, method, h, job, warm))
 
 
 def _one(problem_name: str, method: str, h: float, timeout: float, warm: bool = True,
@@ -215,22 +234,28 @@ def time_at(rows: list[dict], target: float, key: str = "error_u", clock: str = 
     return None
 
 
+def _methods_run(rows: list[dict]) -> list[str]:
+    """The methods that have rows, in LABELS' order."""
+    return [m for m in LABELS if any(r["method"] == m for r in rows)]
+
+
 def table(rows: list[dict], key: str = "error_u", clock: str = "seconds") -> str:
-    """Markdown: per problem and error target, each method's time and its ratios to the faster peer on
-    the CAD geometry and, where run, on the STL (above 1: voxelastic is slower)."""
-    lines = ["| problem | error target | " + " | ".join(LABELS[m] for m in LABELS) + " |",
-             "|---|---|" + "---|" * len(LABELS)]
+    """Markdown: per problem and error target, each method run's time and its ratios to the fastest
+    peer on the CAD geometry and, where run, on the STL (above 1: voxelastic is slower)."""
+    methods = _methods_run(rows)
+    lines = ["| problem | error target | " + " | ".join(LABELS[m] for m in methods) + " |",
+             "|---|---|" + "---|" * len(methods)]
     for prob in dict.fromkeys(r["problem"] for r in rows):
         mine = [r for r in rows if r["problem"] == prob]
         for target in TARGETS:
-            times = {m: time_at([r for r in mine if r["method"] == m], target, key, clock) for m in LABELS}
+            times = {m: time_at([r for r in mine if r["method"] == m], target, key, clock) for m in methods}
             fastest = {}
             for name, group in (("CAD", CAD_PEERS), ("STL", tuple(m for m in PEERS if m not in CAD_PEERS))):
-                found = [times[m] for m in group if times[m] is not None]
+                found = [times[m] for m in group if times.get(m) is not None]
                 if found:
                     fastest[name] = min(found)
             cells = []
-            for m in LABELS:
+            for m in methods:
                 t = times[m]
                 if t is None:
                     cells.append("not reached" if any(r["method"] == m for r in mine) else "-")
@@ -252,7 +277,8 @@ def plot(rows: list[dict], path: Path) -> None:
     problems = list(dict.fromkeys(r["problem"] for r in rows))
     fig, axes = plt.subplots(1, len(problems), figsize=(5.5 * len(problems), 4.5), squeeze=False)
     for ax, prob in zip(axes[0], problems):
-        for i, (m, label) in enumerate(LABELS.items()):
+        for i, m in enumerate(_methods_run(rows)):
+            label = LABELS[m]
             mine = [r for r in rows if r["problem"] == prob and r["method"] == m and "failed" not in r]
             marker, colour = "o" if m in PEERS else "s", f"C{i}"
             for clock, style, name in (("seconds", "-", label), ("seconds_cold", ":", None)):
@@ -323,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
          "repeats": repeats, "medians": rows, "runs": runs}, indent=1, default=float))
     plot(rows, a.out / "accuracy.png")
     text = (f"Displacement (relative L2 at the probes), time to reach the error, warm (a job in a process "
-            f"that has run one before: a service worker); in brackets: over the faster peer's time on the CAD "
+            f"that has run one before: a service worker); in brackets: over the fastest peer's time on the CAD "
             f"geometry, and on the STL where run.\n\n"
             f"{table(rows)}\n\nThe same, cold (the first job in a fresh process: one CLI run):\n\n"
             f"{table(rows, clock='seconds_cold')}\n\nVon Mises stress (relative L2 at the probes), warm:\n\n"

@@ -53,17 +53,12 @@ Commands (from the repository root)::
         [--geometry straight|curved|stl] [--outside error|nearest]
     .venv/bin/python -c "from benchmarks.peer import run_peer; print(run_peer('ball', 1, 0.2)['error_u'])"
 
-Installs (what was needed here: Debian 12, Python 3.11, numpy 1.26.4, scipy 1.17.1)::
-
-    .venv/bin/pip install scikit-fem pyamg gmsh meshio pytetwild
-    # -> scikit-fem 12.0.2, pyamg 5.4.1, gmsh 4.15.2 (the pip wheel). meshio 5.3.5 was already
-    #    installed and is not used: the mesh is read through the gmsh Python API.
-
-The gmsh wheel's libgmsh.so links libGLU.so.1, libGL.so.1, libXcursor.so.1, libXft.so.2,
-libXinerama.so.1, libXrender.so.1, libXfixes.so.3, libXext.so.6, libX11.so.6, libfontconfig.so.1
-and libgomp.so.1; all were already on this image, so no apt-get was run. On a bare Debian / Ubuntu
-image: ``apt-get install -y libglu1-mesa libgl1 libxcursor1 libxft2 libxinerama1 libxrender1
-libfontconfig1 libgomp1``.
+Installs (Debian 12, Python 3.11, numpy 1.26.4, scipy 1.17.1): ``.venv/bin/pip install -e
+'.[benchmarks]'`` (scikit-fem 12.0.2, pyamg 5.4.1, gmsh 4.15.2, pytetwild 0.4.2). The gmsh wheel's
+libgmsh.so links libGLU, libGL, libXcursor, libXft, libXinerama, libXrender, libXfixes, libXext,
+libX11, libfontconfig and libgomp, all on this image; on a bare Debian / Ubuntu image: ``apt-get
+install -y libglu1-mesa libgl1 libxcursor1 libxft2 libxinerama1 libxrender1 libfontconfig1
+libgomp1``. The DOLFINx peer beside this one: ``benchmarks.dolfinx_peer``.
 """
 
 from __future__ import annotations
@@ -226,30 +221,49 @@ def skfem_mesh(gm: _GmshMesh, dim: int) -> tuple[object, object]:
         edges, edge_dofs = linear.edges, dofs.edge_dofs[0]
     else:
         edges, edge_dofs = linear.facets, dofs.facet_dofs[0]
-    n = linear.p.shape[1]
-    ours = np.sort(edges, axis=0)
-    key_ours = ours[0].astype(np.int64) * n + ours[1]
-    key_gmsh = gm.edge_pairs[:, 0] * n + gm.edge_pairs[:, 1]
+    doflocs = mesh.doflocs.copy()
+    doflocs[:, edge_dofs] = gm.edge_points[edge_nodes(gm, edges.T)].T
+    return quadratic_cls(doflocs, mesh.t), linear
+
+
+def edge_nodes(gm: _GmshMesh, ends: np.ndarray) -> np.ndarray:
+    """Index into ``gm.edge_points`` of the node on each edge ends [M, 2] (vertex pairs, any order)."""
+    n = len(gm.points)
+    ours = np.sort(np.asarray(ends, dtype=np.int64), axis=1)
+    key_ours, key_gmsh = ours[:, 0] * n + ours[:, 1], gm.edge_pairs[:, 0] * n + gm.edge_pairs[:, 1]
     order = np.argsort(key_gmsh)
-    where = order[np.searchsorted(key_gmsh[order], key_ours)]
+    where = order[np.searchsorted(key_gmsh[order], key_ours).clip(max=len(order) - 1)]
     if not np.array_equal(key_gmsh[where], key_ours):
         raise RuntimeError("gmsh's second-order nodes do not match the mesh edges")
-    doflocs = mesh.doflocs.copy()
-    moved = gm.edge_points[where].T
     # a node of the wrong edge would be half an edge off; the curving moves it O(h^2)
-    length = np.linalg.norm(linear.p[:, ours[1]] - linear.p[:, ours[0]], axis=0)
-    if np.any(np.linalg.norm(moved - doflocs[:, edge_dofs], axis=0) > 0.25 * length):
+    a, b = gm.points[ours[:, 0]], gm.points[ours[:, 1]]
+    if np.any(np.linalg.norm(gm.edge_points[where] - 0.5 * (a + b), axis=1) > 0.25 * np.linalg.norm(b - a, axis=1)):
         raise RuntimeError("gmsh's second-order nodes are far from their edges' midpoints")
-    doflocs[:, edge_dofs] = moved
-    return quadratic_cls(doflocs, mesh.t), linear
+    return where
+
+
+def make_mesh(prob: Problem, h: float, geometry: str) -> _GmshMesh:
+    """The peer's mesh of the problem (see :func:`run_peer`'s geometry)."""
+    return _stl_mesh(prob, h) if geometry == "stl" else _gmsh_mesh(prob.name, prob.radii, h, geometry == "curved")
+
+
+def facet_roles(prob: Problem, centroids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Masks [F] of the boundary facets (centroids [F, d] [m]) holding u = exact / carrying the load."""
+    radius = np.linalg.norm(centroids, axis=1)
+    inner = radius < 0.5 * sum(prob.radii[:2])
+    if prob.name == "lame":
+        return np.zeros_like(inner), inner
+    if prob.name == "annulus":
+        return inner, ~inner
+    cap = centroids[:, -1] <= BALL_CAP  # facets straddling the plane go by their centroid
+    return cap, ~cap
 
 
 def _discretise(prob: Problem, order: int, h: float, geometry: str) -> _Discretisation:
     import skfem
     from skfem.mapping import MappingAffine
 
-    made = _stl_mesh(prob, h) if geometry == "stl" else _gmsh_mesh(prob.name, prob.radii, h, geometry == "curved")
-    mesh, linear = skfem_mesh(made, prob.dim)
+    mesh, linear = skfem_mesh(make_mesh(prob, h, geometry), prob.dim)
     if prob.dim == 3:
         scalar = skfem.ElementTetP1() if order == 1 else skfem.ElementTetP2()
     else:
@@ -258,17 +272,8 @@ def _discretise(prob: Problem, order: int, h: float, geometry: str) -> _Discreti
     # (Ciarlet & Raviart 1972: exact for degree 2p - 2 on the reference element)
     basis = skfem.Basis(mesh, skfem.ElementVector(scalar), intorder=2 * (order - 1))
     boundary = mesh.boundary_facets()
-    radius = np.linalg.norm(mesh.p[:, mesh.facets[:, boundary]].mean(axis=1), axis=0)
-    empty = np.zeros(0, dtype=boundary.dtype)
-    split = 0.5 * sum(prob.radii[:2])
-    vertex_mapping = MappingAffine(linear)
-    if prob.name == "lame":
-        return _Discretisation(mesh, basis, vertex_mapping, empty, boundary[radius < split])
-    if prob.name == "annulus":
-        return _Discretisation(mesh, basis, vertex_mapping, boundary[radius < split], boundary[radius >= split])
-    centre_z = mesh.p[-1, mesh.facets[:, boundary]].mean(axis=0)
-    cap = centre_z <= BALL_CAP  # facets straddling the plane go by their centroid
-    return _Discretisation(mesh, basis, vertex_mapping, boundary[cap], boundary[~cap])
+    held, loaded = facet_roles(prob, mesh.p[:, mesh.facets[:, boundary]].mean(axis=1).T)
+    return _Discretisation(mesh, basis, MappingAffine(linear), boundary[held], boundary[loaded])
 
 
 # ----------------------------------------------------------------------------- assembly
@@ -483,7 +488,8 @@ def _at_probes(disc: _Discretisation, u: np.ndarray, x: np.ndarray, outside: str
 
 
 # ----------------------------------------------------------------------------- driver
-def _problem(name: str) -> Problem:
+def peer_problem(name: str) -> Problem:
+    """The problem as the peer solves it (lame: the true radii)."""
     base = problem(name)
     if name == "lame":
         # the peer meshes the true spheres, so its exact solution has the true radii
@@ -515,14 +521,8 @@ def run_peer(problem_name: str, order: int, h: float, rtol: float = 1e-10, geome
     reads (3D; meshing time counted like gmsh's). outside: "error" raises :class:`ProbeOutsideMesh` if a
     probe is in no element, "nearest" extrapolates from the closest one.
     """
-    if order not in (1, 2):
-        raise ValueError(f"order: 1 or 2, got {order!r}")
-    if geometry not in ("straight", "curved", "stl") or (geometry == "curved" and order != 2):
-        raise ValueError(f"geometry: 'straight', 'stl', or 'curved' with order 2; got {geometry!r} with order {order}")
-    if outside not in ("error", "nearest"):
-        raise ValueError(f"outside: 'error' or 'nearest', got {outside!r}")
-    prob = _problem(problem_name)  # the exact solution and probes are not the peer's work: untimed
-    lam, mu = prob.lame
+    check_arguments(order, geometry, outside)
+    prob = peer_problem(problem_name)  # the exact solution and probes are not the peer's work: untimed
     _import_libraries()
     stages: dict[str, float] = {}
     start = t = time.perf_counter()
@@ -544,29 +544,40 @@ def run_peer(problem_name: str, order: int, h: float, rtol: float = 1e-10, geome
     t = time.perf_counter()
 
     disp, grad, extrapolated = _at_probes(disc, u, prob.probes.T.copy(), outside)
-    eps = 0.5 * (grad + grad.transpose(0, 2, 1))
-    sigma = 2 * mu * eps + lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(prob.dim)
-    vm = von_mises_of(sigma, lam / (2 * (lam + mu)))  # 2D: plane strain sigma_zz = nu tr sigma
+    vm = von_mises_at(prob, grad)
     stages["probe"] = time.perf_counter() - t
     seconds = time.perf_counter() - start
 
-    return {
-        "method": f"scikit-fem P{order}" + {"straight": "", "curved": " isoparametric", "stl": " on the STL"}[geometry],
-        "problem": problem_name,
-        "h": h,
-        "dofs": int(disc.basis.N),
-        "free_dofs": int(disc.basis.N - len(D)),
-        "elements": int(disc.mesh.t.shape[1]),
-        "seconds": seconds,
-        "stages": stages,
-        "iterations": int(iterations),
-        "residual": residual,
-        "extrapolated": extrapolated,
-        "displacement": disp.tolist(),
-        "von_mises": vm.tolist(),
-        "error_u": relative_l2(disp, prob.exact(prob.probes)),
-        "error_vm": relative_l2(vm, prob.von_mises(prob.probes)),
-    }
+    return record(f"scikit-fem P{order}", geometry, prob, problem_name, h, disp, vm, dofs=int(disc.basis.N),
+                  free_dofs=int(disc.basis.N - len(D)), elements=int(disc.mesh.t.shape[1]), seconds=seconds,
+                  stages=stages, iterations=int(iterations), residual=residual, extrapolated=extrapolated)
+
+
+def check_arguments(order: int, geometry: str, outside: str) -> None:
+    """ValueError unless the peer's order, geometry and outside (see :func:`run_peer`) go together."""
+    if order not in (1, 2):
+        raise ValueError(f"order: 1 or 2, got {order!r}")
+    if geometry not in ("straight", "curved", "stl") or (geometry == "curved" and order != 2):
+        raise ValueError(f"geometry: 'straight', 'stl', or 'curved' with order 2; got {geometry!r} with order {order}")
+    if outside not in ("error", "nearest"):
+        raise ValueError(f"outside: 'error' or 'nearest', got {outside!r}")
+
+
+def von_mises_at(prob: Problem, grad: np.ndarray) -> np.ndarray:
+    """Von Mises stress [N] [Pa] of displacement gradients [N, d, d] (2D: plane strain)."""
+    lam, mu = prob.lame
+    eps = 0.5 * (grad + grad.transpose(0, 2, 1))
+    sigma = 2 * mu * eps + lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(prob.dim)
+    return von_mises_of(sigma, lam / (2 * (lam + mu)))
+
+
+def record(name: str, geometry: str, prob: Problem, problem_name: str, h: float, disp: np.ndarray, vm: np.ndarray,
+           **fields) -> dict:
+    """A peer's record (see :func:`run_peer`): ``fields``, the probe values and their errors."""
+    return {"method": name + {"straight": "", "curved": " isoparametric", "stl": " on the STL"}[geometry],
+            "problem": problem_name, "h": h, **fields, "displacement": disp.tolist(), "von_mises": vm.tolist(),
+            "error_u": relative_l2(disp, prob.exact(prob.probes)),
+            "error_vm": relative_l2(vm, prob.von_mises(prob.probes))}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -580,8 +591,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--outside", default="error", choices=["error", "nearest"],
                         help="probes in no element: fail, or extrapolate from the nearest element")
     args = parser.parse_args(argv)
-    record = run_peer(args.problem, args.order, args.h, args.rtol, args.geometry, args.outside)
-    print(json.dumps({k: v for k, v in record.items() if k not in ("displacement", "von_mises")}, indent=1))
+    out = run_peer(args.problem, args.order, args.h, args.rtol, args.geometry, args.outside)
+    print(json.dumps({k: v for k, v in out.items() if k not in ("displacement", "von_mises")}, indent=1))
 
 
 if __name__ == "__main__":
