@@ -33,7 +33,12 @@ def clustered_rule(facets: np.ndarray, measure: np.ndarray, normals: np.ndarray,
         return np.zeros((0, d)), np.zeros(0), np.zeros((0, d))
     centre = facets.mean(axis=1)  # [M, d]
     key = np.concatenate([np.floor(centre / size), np.round(normals / NORMAL_STEP)], axis=1).astype(np.int64)
-    _, group = np.unique(key, axis=0, return_inverse=True)
+    key -= key.min(axis=0)
+    dims = key.max(axis=0) + 1
+    if np.prod(dims.astype(float)) < 2.0**62:  # one 1D sort of linear keys (rows sort as bytes: 1.1 s at 1.3 M)
+        _, group = np.unique(np.ravel_multi_index(tuple(key.T), tuple(int(n) for n in dims)), return_inverse=True)
+    else:
+        _, group = np.unique(key, axis=0, return_inverse=True)
     group = group.ravel()
     count = int(group.max()) + 1
     area = np.bincount(group, weights=measure, minlength=count)
@@ -48,8 +53,9 @@ def clustered_rule(facets: np.ndarray, measure: np.ndarray, normals: np.ndarray,
     spread = facets - centre[:, None, :]
     own = np.einsum("m,mki,mkj->mij", measure / (d * (d + 1)), spread, spread)
     off = centre - mean[group]
-    second = np.zeros((count, d, d))
-    np.add.at(second, group, own + measure[:, None, None] * off[:, :, None] * off[:, None, :])
+    moment = (own + measure[:, None, None] * off[:, :, None] * off[:, None, :]).reshape(m, d * d)
+    second = np.stack([np.bincount(group, weights=moment[:, k], minlength=count) for k in range(d * d)], 1)
+    second = second.reshape(count, d, d)
     # in the tangent plane only: a curved cluster's spread along its normal would take points off it
     unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     tangent = np.eye(d)[None] - unit[:, :, None] * unit[:, None, :]
