@@ -4,14 +4,15 @@ A scanned or finely tessellated mesh puts dozens of triangles in every grid cell
 triangle makes the surface terms' cost follow the triangle count, not the grid: a 327,680-triangle
 sphere at resolution 48 spent 30 of its 36 s in them, most of it in the coarse multigrid levels'
 hold terms, which took the fine level's 1.8 M points each. Where a coarse rule will do, pieces much
-smaller than the spacing are therefore merged per cluster -- a cube of side ``size`` and normals within about NORMAL_STEP of each
-other, so that a sharp edge or the two sides of a thin wall never share one -- and each cluster gets
-the 2 (d - 1) point rule that matches its measure, centroid and second moments in its tangent plane:
-points at the centroid +- sqrt(d - 1) sigma_k along the principal axes of the second moment (the
-unscented rule; for a single straight segment it is 2-point Gauss). Integrands that are smooth on
-the cluster's scale are integrated to third order in its size; the measure and the first moments
-are exact, so a constant traction keeps its resultant and moment, and so is each cluster's area
-vector (its normal is that over its measure: unit to O((size * curvature)^2)).
+smaller than the spacing are therefore merged per cluster: a cube of side ``size``, and normals
+within about NORMAL_STEP of each other, so that a sharp edge or the two sides of a thin wall never
+share one. Each cluster gets the 2 (d - 1) point rule that matches its measure, centroid and second
+moments in its tangent plane: points at the centroid +- sqrt(d - 1) sigma_k along the principal axes
+of the second moment (the unscented rule; for a single straight segment it is 2-point Gauss).
+Integrands smooth on the cluster's scale are integrated to third order in its size. The measure,
+the first moments and the area vector are exact: a constant traction keeps its resultant and
+moment, a pressure on a closed surface stays in balance. The cluster's normal is its area vector
+over its measure, unit to O((size * curvature)^2).
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ def clustered_rule(facets: np.ndarray, measure: np.ndarray, normals: np.ndarray,
                    size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature of small surface pieces ``facets`` [M, d, d] (measures [M] > 0 [m^2 | m], unit
     outward normals [M, d]) merged into clusters of side ``size`` [m]. Returns points [Q, d] [m],
-    weights [Q] summing to the pieces' total measure, and unit outward normals [Q, d] (each
-    cluster's area vector over its measure)."""
+    weights [Q] summing to the pieces' total measure, and outward normals [Q, d] (each cluster's
+    area vector over its measure)."""
     m, d = facets.shape[0], facets.shape[2]
     if m == 0:
         return np.zeros((0, d)), np.zeros(0), np.zeros((0, d))
@@ -45,9 +46,7 @@ def clustered_rule(facets: np.ndarray, measure: np.ndarray, normals: np.ndarray,
     mean = np.stack([np.bincount(group, weights=measure * centre[:, k], minlength=count) for k in range(d)], 1)
     mean /= area[:, None]
     vector = np.stack([np.bincount(group, weights=measure * normals[:, k], minlength=count) for k in range(d)], 1)
-    # unit to O((size * curvature)^2), and the area vector exactly: a pressure on a closed surface
-    # stays in balance to round-off, as a free body needs
-    normal = vector / area[:, None]
+    normal = vector / area[:, None]  # not normalised: the area vector stays exact (free bodies' balance)
     # second moment about the cluster's centroid: each simplex's own (measure / (d (d + 1)) times the
     # sum of its vertices' outer products about its centroid) plus its centroid's offset
     spread = facets - centre[:, None, :]
