@@ -408,8 +408,9 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     of each piece). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
     grid) are merged into clusters of that side, each with a rule exact to its second moments
     (:mod:`engine.clusters`): points follow the grid, not the triangle count. Zero-area pieces are
-    dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total
-    area / length to round-off) and unit outward normals [Q, d].
+    dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total area / length
+    to round-off) and unit outward normals [Q, d] (a cluster's: its area vector over its measure,
+    unit to O((size * curvature)^2)).
     """
     facets = np.asarray(facets, dtype=float)
     if facets.ndim != 3 or facets.shape[1] != facets.shape[2] or facets.shape[2] not in (2, 3):
