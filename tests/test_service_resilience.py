@@ -81,7 +81,9 @@ def wait_terminal(store: JobStore, job_id: str, timeout: float = 120) -> Job:
 # --- item 1: a database error while a job runs ---------------------------------------------------
 
 
-def test_a_failed_progress_write_stops_the_worker_and_the_next_job_is_unaffected(tmp_path, cache):
+@pytest.fixture
+def local_queue(tmp_path, cache):
+    """(settings, store, storage, a started one-slot LocalQueue), stopped and closed after the test."""
     from service.queue import LocalQueue
 
     settings = settings_for(tmp_path, cache)
@@ -89,53 +91,49 @@ def test_a_failed_progress_write_stops_the_worker_and_the_next_job_is_unaffected
     queue = LocalQueue(store, storage, settings)
     queue.start()
     try:
-        sup = queue._supervisors[0]
-        deadline = time.monotonic() + 120
-        while (sup.process is None or not sup.process.alive()) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        first_pid = sup.process.pid
-        calls = fail_first(store, "progress")
-        first = add_job(store, settings)
-        queue.enqueue(first)
-        done = wait_terminal(store, first)
-        assert calls, "the job wrote no progress"
-        # re-queued per the retry policy and run again on a fresh process, not failed
-        assert done.status == "succeeded" and done.attempts == 2, (done.status, done.error)
-        assert any("attempt 1: the job table could not be written while the job ran" in w for w in done.warnings)
-        assert sup.process.pid != first_pid
-        # the next job reads its own messages, not the stale "done" of the interrupted attempt
-        second = add_job(store, settings)
-        queue.enqueue(second)
-        after = wait_terminal(store, second)
-        assert after.status == "succeeded" and after.attempts == 1, (after.status, after.error)
-        assert storage.result_path(first).is_file() and storage.result_path(second).is_file()
+        yield settings, store, storage, queue
     finally:
         queue.stop()
         store.close()
 
 
-def test_the_slot_survives_when_the_end_of_an_attempt_cannot_be_written(tmp_path, cache):
-    from service.queue import LocalQueue
+def test_a_failed_progress_write_stops_the_worker_and_the_next_job_is_unaffected(local_queue):
+    settings, store, storage, queue = local_queue
+    sup = queue._supervisors[0]
+    deadline = time.monotonic() + 120
+    while (sup.process is None or not sup.process.alive()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    first_pid = sup.process.pid
+    calls = fail_first(store, "progress")
+    first = add_job(store, settings)
+    queue.enqueue(first)
+    done = wait_terminal(store, first)
+    assert calls, "the job wrote no progress"
+    # re-queued per the retry policy and run again on a fresh process, not failed
+    assert done.status == "succeeded" and done.attempts == 2, (done.status, done.error)
+    assert any("attempt 1: the job table could not be written while the job ran" in w for w in done.warnings)
+    assert sup.process.pid != first_pid
+    # the next job reads its own messages, not the stale "done" of the interrupted attempt
+    second = add_job(store, settings)
+    queue.enqueue(second)
+    after = wait_terminal(store, second)
+    assert after.status == "succeeded" and after.attempts == 1, (after.status, after.error)
+    assert storage.result_path(first).is_file() and storage.result_path(second).is_file()
 
-    settings = settings_for(tmp_path, cache)
-    store, storage = JobStore(settings.db_url), Storage(settings.data_dir)
-    queue = LocalQueue(store, storage, settings)
-    queue.start()
-    try:
-        fail_first(store, "progress")
-        # recording the attempt's end fails too, twice (the old code's store.fail: once)
-        requeues = fail_first(store, "requeue", times=2)
-        fail_first(store, "fail")
-        job_id = add_job(store, settings)
-        queue.enqueue(job_id)
-        done = wait_terminal(store, job_id)
-        assert len(requeues) == 3  # two failures, then recorded by the slot before its next claim
-        assert done.status == "succeeded" and done.attempts == 2, (done.status, done.error)
-        ok, info = queue.health()
-        assert ok and info["slots_alive"] == 1, info
-    finally:
-        queue.stop()
-        store.close()
+
+def test_the_slot_survives_when_the_end_of_an_attempt_cannot_be_written(local_queue):
+    settings, store, storage, queue = local_queue
+    fail_first(store, "progress")
+    # recording the attempt's end fails too, twice (the old code's store.fail: once)
+    requeues = fail_first(store, "requeue", times=2)
+    fail_first(store, "fail")
+    job_id = add_job(store, settings)
+    queue.enqueue(job_id)
+    done = wait_terminal(store, job_id)
+    assert len(requeues) == 3  # two failures, then recorded by the slot before its next claim
+    assert done.status == "succeeded" and done.attempts == 2, (done.status, done.error)
+    ok, info = queue.health()
+    assert ok and info["slots_alive"] == 1, info
 
 
 def test_with_no_attempts_left_the_job_fails_naming_the_database(tmp_path, cache):
