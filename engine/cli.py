@@ -34,8 +34,10 @@ def _read_spec(path: str):
     """The parsed job spec, or a list of error lines (file unreadable, invalid spec)."""
     from schemas import SpecError, parse_job
 
+    from .files import read_input
+
     try:
-        return parse_job(Path(path).read_bytes())
+        return parse_job(read_input(path))
     except OSError as exc:
         return [f"cannot read job file '{path}': {exc.strerror or exc}"]
     except SpecError as exc:

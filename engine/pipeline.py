@@ -21,6 +21,7 @@ import numpy as np
 from schemas import JobSpec, parse_job
 
 from .errors import BoundaryError, GeometryError, GridError, VoxelasticError
+from .files import read_input
 from .geometry.cache import GeometryCache, cache_key, default_directory
 from .geometry.containment import in_solid
 from .geometry.fractions import VolumeFractions, volume_fractions
@@ -97,7 +98,7 @@ def read_mesh_input(spec: JobSpec, mesh: MeshInput, filename: str | None, base_d
         if not path.is_absolute() and base_dir is not None:
             path = base_dir / path
     try:
-        return path.read_bytes(), path.name
+        return read_input(path), path.name
     except OSError as exc:
         raise GeometryError(f"geometry.mesh: cannot read '{path}': {exc.strerror or exc}") from None
 

@@ -153,3 +153,32 @@ def test_probes_outside_the_solid_are_a_warning_saying_how_many_and_where(tmp_pa
     assert "merged" not in out.stderr  # STL shares no corners: merging them is not worth a word
     result = read_result(tmp_path / "r.h5")
     assert any("2 of 3 probes lie outside the solid" in w for w in result.solver.warnings)
+
+
+def test_a_device_named_as_the_job_or_the_mesh_is_refused_not_read(tmp_path):
+    # /dev/zero used to be read until memory ran out (validate, run and voxelize alike)
+    (tmp_path / "zero.stl").symlink_to("/dev/zero")
+    spec = job(tmp_path, grid={"resolution": 8, "padding": 1})
+    data = json.loads(spec.read_text())
+    data["geometry"]["mesh"] = "zero.stl"
+    spec.write_text(json.dumps(data))
+    device = "it is a character device, not a file"
+    assert one_error_line(cli("validate", "/dev/zero")) == f"error: cannot read job file '/dev/zero': {device}"
+    for args in (("validate", spec), ("run", spec, "-o", tmp_path / "r.h5")):
+        line = one_error_line(cli(*args, timeout=60))
+        assert line == f"error: geometry.mesh: cannot read '{tmp_path / 'zero.stl'}': {device}", line
+    line = one_error_line(cli("voxelize", tmp_path / "zero.stl", "--resolution", "8", "-o", tmp_path / "v.h5", timeout=60))
+    assert line == f"error: geometry.mesh: cannot read 'zero.stl': {device}", line
+    # a pipe is read: a spec handed over on standard input (its mesh named by an absolute path)
+    data["geometry"]["mesh"] = str(tmp_path / "cantilever.stl")
+    piped = subprocess.run([sys.executable, "-m", "engine.cli", "validate", "/dev/stdin"], input=json.dumps(data),
+                           capture_output=True, text=True, timeout=60)
+    assert piped.returncode == 0 and piped.stdout.startswith("OK: /dev/stdin"), piped.stderr
+
+
+def test_a_path_with_a_nul_character_is_an_oserror_in_words():
+    from engine.files import read_input
+
+    with pytest.raises(OSError) as info:
+        read_input("part\0.stl")
+    assert info.value.strerror == "the path holds a NUL character, which no file name can"

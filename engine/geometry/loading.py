@@ -44,6 +44,7 @@ from trimesh.exchange.load import mesh_formats, path_formats
 from trimesh.resolvers import FilePathResolver, ZipResolver
 
 from engine.errors import GeometryError
+from engine.files import read_input
 from engine.geometry._shared import FLAT_TOL, check_volume, describe_error, place
 from engine.geometry.inflate import DEFAULT_MAX_INFLATED, check_zip_container, container_suffix, inflate
 from engine.geometry.polygon import drawing_surface
@@ -220,7 +221,7 @@ def _resolve_source(source, filename: str | None):
         path = Path(source)
         name = filename or path.name
         try:
-            data = path.read_bytes()
+            data = read_input(path)
         except OSError as exc:
             raise GeometryError(f"cannot read '{name}': {exc.strerror or exc}") from None
         resolver = FilePathResolver(str(path))  # GLTF buffers, OBJ materials beside the file
