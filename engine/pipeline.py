@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from schemas import JobSpec, parse_job
+from schemas import JobSpec, OutputSpec, parse_job
 
 from .errors import BoundaryError, GeometryError, GridError, VoxelasticError
 from .files import read_input
@@ -274,10 +274,10 @@ def run(
         # the rest goes before the solve (for the staggered method: its face and edge fractions)
         result = geometry_result(spec.model_dump(mode="json"), geo, spec.method.kind)
         probes = np.asarray(spec.output.probes, dtype=float) if spec.output.probes else None
-        outside = None if probes is None else ~in_solid(geo.surface, probes, geo.grid.spacing)
+        inside = None if probes is None else in_solid(geo.surface, probes, geo.grid.spacing)
         del geo
         t = time.perf_counter()
-        outcome = run_analysis(method, spec.analysis, spec.output, progress)
+        outcome = run_analysis(method, spec.analysis, sampled_output(spec.output, inside), progress)
     except VoxelasticError as exc:
         # what loading and setup noticed often explains the failure (an inverted mesh, bodies the
         # grid joins): the CLI prints it with the error
@@ -286,9 +286,8 @@ def run(
     times["solve"] = time.perf_counter() - t
     result.fields, result.steps = outcome.final, outcome.steps
     result.probe_points = probes
-    if outside is not None and outside.any():
-        for level in [result.fields, *result.steps]:
-            blank_probes(level, outside)
+    if inside is not None and not inside.all():
+        spread_probes([result.fields, *result.steps], inside, spec.dimension)
     if not spec.output.surface:
         result.surface_vertices = result.surface_faces = None
     result.solver = SolverReport(
@@ -301,14 +300,27 @@ def run(
     return result
 
 
-def blank_probes(level: FieldData, outside: np.ndarray) -> None:
-    """NaN in every field of ``level`` at the probes ``outside`` [P] bool: a method's samples may
-    reach a little beyond the surface (the staggered displacement of a face's samples, a strain
-    fitted from the cells around), but a probe outside the solid has no value to report."""
-    for name, values in level.probes.items():
-        values = np.array(values, dtype=float)
-        values[outside] = np.nan
-        level.probes[name] = values
+def sampled_output(output: OutputSpec, inside: np.ndarray | None) -> OutputSpec:
+    """``output`` with only the probes ``inside`` [P] bool the solid: a method is not asked for
+    values where there is nothing to sample (a probe at 1e308 m overflowed the staggered method's
+    strain fit into an exception); :func:`spread_probes` gives the others NaN."""
+    if inside is None or inside.all():
+        return output
+    return output.model_copy(update={"probes": [p for p, keep in zip(output.probes, inside) if keep]})
+
+
+def spread_probes(levels: list[FieldData], inside: np.ndarray, dimension: int) -> None:
+    """Every probe's values in each of ``levels``, from those the method gave at the probes
+    ``inside`` [P] bool: NaN at the probes outside the solid, which have no value to report. Each
+    field's components are those of its cell values ([*grid.shape, *c] -> [P, *c]), which are there
+    even when no probe is inside. Levels that share their probe values (the final state of a stepped
+    analysis is its last step) are spread once."""
+    for level in {id(level.probes): level for level in levels}.values():
+        for name, cells in level.cells.items():
+            values = np.full((len(inside), *np.shape(cells)[dimension:]), np.nan)
+            if name in level.probes:
+                values[inside] = level.probes[name]
+            level.probes[name] = values
 
 
 def _discretize(spec: JobSpec, geo: Geometry, functions: Functions, progress: Setup | None = None) -> Method:

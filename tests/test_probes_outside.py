@@ -86,3 +86,26 @@ def test_in_solid_counts_the_surface_up_to_round_off_as_inside():
     points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 1], [1, 1, 0.3], [1 + 0.5 * tol, 0, 0],
                        [1 + 2 * tol, 0, 0], [1.05, 0, 0], [5, 5, 5], [-1 - 2 * tol, -1, -1]])
     assert in_solid(surface, points, h).tolist() == [True] * 5 + [False] * 4
+
+
+@pytest.mark.parametrize("method, resolution", [({"kind": "staggered"}, 8), ({"kind": "dg", "degree": 1}, 4)])
+def test_probes_far_away_are_nan_at_every_step_and_the_method_is_not_asked(tmp_path, method, resolution):
+    # a probe at 1e308 m overflowed the staggered strain fit: "Eigenvalues did not converge", a
+    # traceback from the CLI and a failed job in the service
+    spec = pulled_cube(method, resolution)
+    far = [[1e308, 0.5, 0.5], [-1e300, 1e300, 1e300], [0.5, 1e30, 0.5]]
+    spec["output"]["probes"] = [far[0], [0.5, 0.5, 0.5], *far[1:]]
+    spec["analysis"] = {"kind": "quasistatic", "steps": 2}
+    result = engine.simulate(spec, cube(tmp_path))
+    for level in [result.fields, *result.steps]:
+        assert sorted(level.probes) == sorted(FIELDS)
+        for name, values in level.probes.items():
+            values = np.asarray(values).reshape(4, -1)
+            assert np.isnan(values[[0, 2, 3]]).all() and np.isfinite(values[1]).all(), (name, values)
+    assert outside_probes_warning(result).startswith("3 of 4 probes lie outside the solid")
+    # none inside: every field is there, NaN throughout
+    spec["output"]["probes"] = far
+    result = engine.simulate(spec, cube(tmp_path))
+    assert {name: np.shape(v) for name, v in result.fields.probes.items()} == {
+        "displacement": (3, 3), "strain": (3, 6), "stress": (3, 6), "von_mises": (3,), "pressure": (3,)}
+    assert all(np.isnan(v).all() for v in result.fields.probes.values())

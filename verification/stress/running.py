@@ -121,7 +121,7 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.method import method_entry
-    from engine.pipeline import Functions, blank_probes, compute_geometry
+    from engine.pipeline import Functions, compute_geometry, sampled_output, spread_probes
     from engine.runtime import init
     from schemas import parse_job
 
@@ -143,11 +143,11 @@ def solve(spec: dict, mesh: trimesh.Trimesh, *, grid: Grid | None = None, condit
         return state
 
     method.solve = recorded  # every step's solve statistics, not only the last one's
-    outcome = run_analysis(method, parsed.analysis, parsed.output, lambda *a: None)
-    if parsed.output.probes:  # as engine.pipeline.run: a probe outside the solid has no values
-        outside = ~in_solid(surface, np.asarray(parsed.output.probes, dtype=float), grid.spacing)
-        for level in [outcome.final, *outcome.steps]:
-            blank_probes(level, outside)
+    # as engine.pipeline.run: a probe outside the solid has no values, and the method is not asked
+    inside = in_solid(surface, np.asarray(parsed.output.probes, dtype=float), grid.spacing) if parsed.output.probes else None
+    outcome = run_analysis(method, parsed.analysis, sampled_output(parsed.output, inside), lambda *a: None)
+    if inside is not None and not inside.all():
+        spread_probes([outcome.final, *outcome.steps], inside, parsed.dimension)
     seconds = time.perf_counter() - t0
     t1 = time.perf_counter()
     cond = condition_number(method) if condition else math.nan
