@@ -193,8 +193,14 @@ def _barycentric(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     rhs = points - a
     gram = np.einsum("mid,mjd->mij", edges, edges)
     proj = np.einsum("mid,md->mi", edges, rhs)
-    gram += np.eye(gram.shape[1]) * 1e-300  # degenerate facets: the first corner takes it all
-    lam = np.linalg.solve(gram, proj[..., None])[..., 0]
+    # a degenerate facet (corners on one line, or all in one point; the loader keeps facets of zero
+    # area whose corners differ) has a singular Gram matrix: least squares, by its pseudo-inverse,
+    # puts the point on the line (or the first corner) and solve() raised "Singular matrix"
+    size = np.einsum("mii->m", gram)
+    regular = np.linalg.det(gram) > 1e-12 * size ** gram.shape[1]
+    lam = np.empty_like(proj)
+    lam[regular] = np.linalg.solve(gram[regular], proj[regular][..., None])[..., 0]
+    lam[~regular] = np.einsum("mij,mj->mi", np.linalg.pinv(gram[~regular]), proj[~regular])
     return np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)
 
 

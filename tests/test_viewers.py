@@ -233,3 +233,24 @@ def test_preview_shows_the_object(results, tmp_path):
     assert coloured.mean() > 0.05  # the object and its colour bar, not a blank picture
     centre = coloured[60:240, 60:380]
     assert centre.mean() > 0.05  # the bar itself, in the middle of the picture
+
+
+def test_facets_of_zero_area_refine_without_a_singular_matrix(tmp_path):
+    from engine.views import refine_surface
+
+    # a box with a stray facet whose corners lie on one line (the loader keeps it: its corners
+    # differ): writing the voxelized result's viewer files raised "Singular matrix"
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [3, 0, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1], [2, 2, 2]], dtype=float)
+    faces = np.array([[0, 1, 2], [3, 4, 5], [6, 6, 6]])
+    refined = refine_surface(vertices, faces, 0.25)
+    corners = vertices[faces[refined.parent]]
+    assert np.isfinite(refined.weights).all()
+    assert np.allclose(refined.weights.sum(axis=1), 1.0)
+    assert np.allclose(np.einsum("mk,mkd->md", refined.weights, corners), refined.vertices)
+    box = "".join(f"v {x} {y} {z}\n" for x in (0, 1) for y in (0, 1) for z in (0, 1))
+    box += "f 1 2 4 3\nf 5 7 8 6\nf 1 5 6 2\nf 3 4 8 7\nf 1 3 7 5\nf 2 6 8 4\n"
+    (tmp_path / "box.obj").write_text(box + "v 0.5 0.5 0.5\nv 0.6 0.5 0.5\nv 0.9 0.5 0.5\nf 9 10 11\n")
+    from engine.cli import main
+
+    assert main(["voxelize", str(tmp_path / "box.obj"), "--resolution", "8", "-o", str(tmp_path / "box.h5")]) == 0
+    assert meshio.read(tmp_path / "box.surface.xdmf").points.shape[1] == 3
