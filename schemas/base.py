@@ -19,6 +19,7 @@ Conventions shared by every model:
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -141,6 +142,25 @@ def integer_choice(*choices: int) -> BeforeValidator:
 
 Integer = Annotated[int, INTEGER]
 Flag = Annotated[bool, FLAG]
+
+# Text the engine puts into its messages (a boundary's name, the mesh file's name) must not break
+# the line it is printed on or drive the terminal that shows it: no C0/C1 control characters
+# (newline, tab, ESC, NUL), DEL, or Unicode line and paragraph separators. A name holding "\n\x1b[31m"
+# split a one-line CLI error in two and coloured the rest red.
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def _one_line(text: str) -> str:
+    found = _CONTROL.search(text)
+    if found:
+        raise custom_error("control_character", f"holds the control character U+{ord(found.group()):04X} at "
+                           f"position {found.start()}; it is shown in messages, as one line of plain text")
+    return text
+
+
+# One line of plain text, not empty (the JSON Schema states the same as a pattern, in ECMA-262 escapes)
+Text = Annotated[str, Field(min_length=1, json_schema_extra={"pattern": r"^[^\u0000-\u001f\u007f-\u009f\u2028\u2029]*$"}),
+                 AfterValidator(_one_line)]
 
 # A vector in R^dimension. The schema states 2..3 items; the exact length needs the document's dimension.
 Vector = Annotated[

@@ -31,6 +31,7 @@ from .base import (
     Integer,
     Real,
     SpecModel,
+    Text,
     Vector,
     check_length,
     current_dimension,
@@ -60,7 +61,7 @@ class GeometrySpec(SpecModel):
 
     model_config = ConfigDict(json_schema_extra={"oneOf": [{"required": ["mesh"]}, {"required": ["polygon"]}]})
 
-    mesh: Annotated[str, Field(min_length=1)] | None = Field(
+    mesh: Text | None = Field(
         None,
         json_schema_extra=not_null,
         description="Surface mesh file (STL/OBJ/PLY/OFF...; SVG/DXF in 2D). CLI: a path relative to the "
@@ -236,7 +237,7 @@ class LoadsSpec(SpecModel):
 
 class _Boundary(SpecModel):
     kind: str  # declared first so that it leads in dumps and the schema; narrowed by each subclass
-    name: str | None = Field(None, min_length=1, description="Label used in messages and results.")
+    name: Text | None = Field(None, description="Label used in messages and results.")
     region: Region
     facing: Facing | None = Field(
         None, description="Optional: keep only the facets of the patch whose outward normal faces this way."

@@ -405,6 +405,11 @@ BAD = [
     ("region extra key", "boundaries.3.region.radius", 1, "boundaries.3.region.radius", "unknown key"),
     ("region all false", "boundaries.0.region", {"all": False}, "boundaries.0.region.all", "Input should be True"),
     ("empty name", "boundaries.0.name", "", "boundaries.0.name", "at least 1 character"),
+    # names are printed in one-line messages: a newline split them, ESC drove the terminal
+    ("name with a newline", "boundaries.0.name", "clamp\n\x1b[31m", "boundaries.0.name",
+     "holds the control character U+000A at position 5; it is shown in messages, as one line of plain text"),
+    ("mesh name with NUL", "geometry.mesh", "part\x00.stl", "geometry.mesh", "holds the control character U+0000 at position 4"),
+    ("mesh name with a line separator", "geometry.mesh", "a\u2028b.stl", "geometry.mesh", "control character U+2028"),
     ("quasistatic steps", "analysis", {"kind": "quasistatic", "steps": 0}, "analysis.steps",
      "greater than or equal to 1"),
     ("dynamic dt", "analysis", {"kind": "dynamic", "time_step": 0, "steps": 5}, "analysis.time_step",
