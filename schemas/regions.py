@@ -47,9 +47,16 @@ class SphereRegion(SpecModel):
 
 
 def _nonzero(vector: tuple[float, ...], name: str) -> tuple[float, ...]:
-    """Validator: a direction must have a length (error type zero_<name>)."""
-    if math.hypot(*vector) == 0:
+    """Validator: a direction must have a length (error type zero_<name>) that double precision can
+    normalise (error type <name>_length): the engine divides by sqrt(sum of squares), whose squares
+    underflow to 0 below about 1e-154 (a normal [1e-170, 0, 0] made every region test NaN) and
+    overflow to inf above about 1e154 (a direction [1e160, 0, 0] became (0, 0, 0))."""
+    length = math.hypot(*vector)
+    if length == 0:
         raise custom_error(f"zero_{name}", f"{name} must be non-zero")
+    if not 0 < math.fsum(v * v for v in vector) < math.inf:
+        raise custom_error(f"{name}_length", f"{name} has length {length:.3g}, too {'small' if length < 1 else 'large'} "
+                           "to normalise in double precision; only its direction counts: give it a length near 1")
     return vector
 
 

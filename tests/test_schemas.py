@@ -405,6 +405,12 @@ BAD = [
     ("region extra key", "boundaries.3.region.radius", 1, "boundaries.3.region.radius", "unknown key"),
     ("region all false", "boundaries.0.region", {"all": False}, "boundaries.0.region.all", "Input should be True"),
     ("empty name", "boundaries.0.name", "", "boundaries.0.name", "at least 1 character"),
+    # directions are normalised by sqrt(sum of squares): squares that underflow or overflow made them NaN or 0
+    ("tiny normal", "boundaries.0.region", {"halfspace": {"point": [0, 0, 0], "normal": [1e-170, 0, 0]}},
+     "boundaries.0.region.halfspace.normal", "normal has length 1e-170, too small to normalise in double precision"),
+    ("huge facing", "boundaries.0.facing", {"direction": [0, -1e160, 1e160], "max_angle_deg": 30},
+     "boundaries.0.facing.direction", "direction has length 1.41e+160, too large to normalise in double precision; "
+     "only its direction counts: give it a length near 1"),
     # names are printed in one-line messages: a newline split them, ESC drove the terminal
     ("name with a newline", "boundaries.0.name", "clamp\n\x1b[31m", "boundaries.0.name",
      "holds the control character U+000A at position 5; it is shown in messages, as one line of plain text"),
