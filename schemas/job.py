@@ -8,6 +8,7 @@ The conventions every model follows (unknown keys, finite floats, SI units, vect
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Annotated, Any, Literal, Union
 
@@ -224,10 +225,35 @@ class MaterialSpec(SpecModel):
     model: Literal["linear", "corotated"] = Field("linear", description="Small-strain or corotated elasticity.")
 
 
+# Loads and prescribed values beyond this magnitude overflow the solvers' f64 arithmetic: the load
+# vector's squared norm passes 1e308 (a traction or gravity of 1e308, a displacement of 1e308 in
+# the Nitsche terms) and the job failed in the solve with "the load vector is not finite", after it
+# was accepted and queued. The body force density x gravity is bounded alike (JobSpec).
+LOAD_LIMIT = 1e100
+
+
+def _load(unit: str) -> Any:
+    """A number of at most LOAD_LIMIT in magnitude [``unit``]: a load or prescribed value."""
+
+    def check(value: float) -> float:
+        if abs(value) > LOAD_LIMIT:
+            raise custom_error("load_range", f"{value:g} {unit} is beyond +-{LOAD_LIMIT:g} {unit}, the range the "
+                               "solvers' arithmetic is checked over")
+        return value
+
+    return Annotated[Real, AfterValidator(check), Field(json_schema_extra={"minimum": -LOAD_LIMIT, "maximum": LOAD_LIMIT})]
+
+
+def _load_vector(unit: str) -> Any:
+    """A vector (length dimension, as :data:`Vector`) of loads in ``unit``."""
+    return Annotated[tuple[_load(unit), ...], Field(json_schema_extra={"minItems": 2, "maxItems": 3}),
+                     AfterValidator(check_length)]
+
+
 class LoadsSpec(SpecModel):
     """Body loads."""
 
-    gravity: Vector | None = Field(
+    gravity: _load_vector("m/s^2") | None = Field(
         None, description="Gravitational acceleration [m/s^2], length dimension; null/absent = zero vector."
     )
 
@@ -250,7 +276,7 @@ class DisplacementBoundary(_Boundary):
 
     model_config = TAGGED
     kind: Literal["displacement"] = "displacement"
-    value: Annotated[tuple[Real | None, ...], AfterValidator(check_length)] = Field(
+    value: Annotated[tuple[_load("m") | None, ...], AfterValidator(check_length)] = Field(
         description="Displacement [m] per component, null = free (length dimension, at least one number).",
         json_schema_extra={"minItems": 2, "maxItems": 3},
     )
@@ -268,7 +294,7 @@ class TractionBoundary(_Boundary):
 
     model_config = TAGGED
     kind: Literal["traction"] = "traction"
-    value: Vector = Field(description="Traction (force per area) [Pa], length dimension.")
+    value: _load_vector("Pa") = Field(description="Traction (force per area) [Pa], length dimension.")
 
 
 class PressureBoundary(_Boundary):
@@ -276,7 +302,7 @@ class PressureBoundary(_Boundary):
 
     model_config = TAGGED
     kind: Literal["pressure"] = "pressure"
-    value: Real = Field(description="Pressure [Pa]; positive pushes into the surface.")
+    value: _load("Pa") = Field(description="Pressure [Pa]; positive pushes into the surface.")
 
 
 Boundary = Annotated[
@@ -408,6 +434,16 @@ class JobSpec(SpecModel):
             i = self.output.fields.index("velocity")
             raise_at("JobSpec", [(("output", "fields", i), "velocity_static", "'velocity' needs analysis.kind "
                                   f"'dynamic' (a {self.analysis.kind} state has none)", "velocity")])
+        return self
+
+    @model_validator(mode="after")
+    def _body_force_in_range(self) -> JobSpec:
+        g = self.loads.gravity
+        force = self.material.density * math.hypot(*g) if g is not None else 0.0
+        if force > LOAD_LIMIT:
+            raise_at("JobSpec", [(("loads", "gravity"), "load_range", f"the body force material.density x |gravity| "
+                                  f"= {force:.3g} N/m^3 is beyond {LOAD_LIMIT:g} N/m^3, the range the solvers' "
+                                  "arithmetic is checked over", g)])
         return self
 
     @model_validator(mode="after")

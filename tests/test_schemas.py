@@ -388,6 +388,14 @@ BAD = [
     ("displacement NaN", "boundaries.2.value", [None, math.nan, None], "boundaries.2.value.1", "finite"),
     ("traction short", "boundaries.3.value", [0, -100], "boundaries.3.value", "expected 3 components"),
     ("pressure vector", "boundaries.4.value", [1, 2, 3], "boundaries.4.value", "expected a number, got an array"),
+    # loads of 1e308 were accepted and failed in the solve ("the load vector is not finite")
+    ("gravity 1e308", "loads.gravity", [0, 0, -1e308], "loads.gravity.2",
+     "-1e+308 m/s^2 is beyond +-1e+100 m/s^2, the range the solvers' arithmetic is checked over"),
+    ("traction 1e101", "boundaries.3.value", [0, 1e101, 0], "boundaries.3.value.1", "1e+101 Pa is beyond +-1e+100 Pa"),
+    ("pressure -1e200", "boundaries.4.value", -1e200, "boundaries.4.value", "-1e+200 Pa is beyond +-1e+100 Pa"),
+    ("displacement 1e308", "boundaries.2.value", [None, 1e308, None], "boundaries.2.value.1", "1e+308 m is beyond"),
+    ("body force", "material.density", 1e100, "loads.gravity",
+     "the body force material.density x |gravity| = 9.81e+100 N/m^3 is beyond 1e+100 N/m^3"),
     # JSON types are not coerced: true would have run with E = 1 Pa
     ("E true", "material.youngs_modulus", True, "material.youngs_modulus", "expected a number, got true"),
     ("E string", "material.youngs_modulus", "1e7", "material.youngs_modulus", "expected a number, got '1e7'"),
