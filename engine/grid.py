@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import GridError
+from .geometry._shared import MAX_COORDINATE
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,10 @@ class Grid:
         return {"origin": list(self.origin), "spacing": self.spacing, "shape": list(self.shape)}
 
 
+MAX_CELL_OVER_EXTENT = 1000.0
+"""Largest cell size as a multiple of the geometry's longest side (``make_grid``)."""
+
+
 def make_grid(
     lower: np.ndarray,
     upper: np.ndarray,
@@ -110,6 +115,15 @@ def make_grid(
         cell_size = float(extent.max()) / resolution
     if not (math.isfinite(cell_size) and cell_size > 0):
         raise GridError(f"grid.cell_size: must be a positive finite number, got {cell_size}")
+    # Cells far larger than the geometry hold all of it in one anyway, and lose it to round-off: the
+    # part is a sliver of the cell (the volume fractions drop what is under 1e-12 of a sub-cell: a
+    # 1 m bar in 1e4 m cells voxelized to no solid at all) and a speck beside the grid's origin (hex
+    # slicing in the grid's frame). 1e308 m cells overflowed twice the spacing and the cell volume.
+    largest = min(MAX_CELL_OVER_EXTENT * float(extent.max()), MAX_COORDINATE)
+    if cell_size > largest:
+        raise GridError(f"grid.cell_size: {cell_size:g} m is over {MAX_CELL_OVER_EXTENT:g} times the geometry's "
+                        f"longest side ({float(extent.max()):.6g} m); a cell that large holds all of it and loses it "
+                        "to round-off: give a cell size below the part's size")
     # cell counts as Python integers: a huge resolution or a tiny cell size must be reported as
     # too many cells, not wrap around int64 into a negative shape
     with np.errstate(over="ignore"):

@@ -182,3 +182,21 @@ def test_a_path_with_a_nul_character_is_an_oserror_in_words():
     with pytest.raises(OSError) as info:
         read_input("part\0.stl")
     assert info.value.strerror == "the path holds a NUL character, which no file name can"
+
+
+def test_cells_far_larger_than_the_part_are_refused_not_rounded_away(tmp_path):
+    # a 1 m bar in 1e4 m cells voxelized to "solid 0 (mesh 0.04)" with exit 0, and run raised a
+    # ValueError inside the staggered setup (1e308 m cells: an overflow of twice the spacing)
+    huge = job(tmp_path, grid={"cell_size": 1e4, "padding": 1})
+    reason = ("error: grid.cell_size: 10000 m is over 1000 times the geometry's longest side (1 m); a cell that "
+              "large holds all of it and loses it to round-off: give a cell size below the part's size")
+    assert one_error_line(cli("validate", huge)) == reason
+    assert one_error_line(cli("run", huge, "-o", tmp_path / "r.h5")) == reason
+    assert one_error_line(cli("voxelize", STL, "--cell-size", "1e4", "-o", tmp_path / "v.h5")) == reason
+    # within that bound a thin rod is still under the fractions' round-off in every cell
+    import trimesh
+
+    trimesh.creation.box((1, 1e-3, 1e-3)).export(tmp_path / "rod.stl")
+    line = one_error_line(cli("voxelize", tmp_path / "rod.stl", "--cell-size", "1000", "-o", tmp_path / "v.h5"))
+    assert line.startswith("error: grid.cell_size: no cell holds a share of the solid above round-off"), line
+    assert not list(tmp_path.glob("*.h5"))

@@ -105,7 +105,11 @@ def volume_fractions(surface: Surface, grid: Grid, *, keep_subcells: bool = Fals
         )
     control = {s: concat(tuple(n + o for n, o in zip(grid.shape, s)), TILE, p) for s, p in parts.items()}
     subcells = concat(tuple(2 * n for n in grid.shape), 2 * TILE, sub_parts) if keep_subcells else None
-    return VolumeFractions(grid, control, subcells, warnings)
+    fractions = VolumeFractions(grid, control, subcells, warnings)
+    if not fractions.cells.sum() > 0:  # a solid thinner than ROUND_OFF of every sub-cell it is in
+        raise GridError(f"grid.cell_size: no cell holds a share of the solid above round-off ({ROUND_OFF:g} of a "
+                        f"sub-cell): cells of {grid.spacing:.6g} m are far too large for it; give a smaller cell size")
+    return fractions
 
 
 def slab_tiles(grid: Grid) -> list[int]:
