@@ -127,20 +127,6 @@ def _admit(spec, base_dir: Path):
     return surface, grid
 
 
-def _boundary_checks(spec, surface) -> list[str]:
-    """What run refuses about the boundaries, found without a solve: a region that holds no surface,
-    two holds that disagree on a common patch; returns the holds' warnings."""
-    from .boundary import check_holds, make_boundaries, select_patch
-    from .material import Material
-    from .pipeline import Functions
-
-    b = make_boundaries(spec, Functions(), Material.from_spec(spec.material))
-    facets = surface.vertices[surface.faces]
-    for bc in [*b.prescribed, *b.loads]:
-        select_patch(bc.region, facets, bc.name)
-    return check_holds(b.prescribed, surface)
-
-
 def _check_memory(grid, entry, method_spec, limits, surface) -> None:
     from .errors import GridError
 
@@ -219,6 +205,7 @@ class ProgressBar:
 
 def cmd_validate(args) -> int:
     from .errors import VoxelasticError
+    from .pipeline import check_boundaries
 
     spec = _read_spec(args.job)
     if isinstance(spec, list):
@@ -234,7 +221,7 @@ def cmd_validate(args) -> int:
         # and the room for the result where run would write it (-o; by default here)
         _check_room(args.output or "result.h5", grid.shape, spec.output.fields, levels=_result_levels(spec),
                     probes=len(spec.output.probes), spec=spec)
-        notes = _boundary_checks(spec, surface)
+        notes = check_boundaries(spec, surface)
     except (VoxelasticError, _NoRoom) as exc:
         return _error(str(exc))
     for note in notes:

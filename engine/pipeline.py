@@ -236,6 +236,20 @@ class Functions:
                                     f"{type(getattr(self, name)).__name__}")
 
 
+def check_boundaries(spec: JobSpec, surface: Surface) -> list[str]:
+    """What ``run`` refuses about the boundaries, found without a grid or a solve (``voxelastic
+    validate``, the service's admission): a region that holds no surface, two holds that disagree on
+    a common patch (BoundaryError naming the boundaries); returns the holds' warnings."""
+    from .boundary import check_holds, make_boundaries, select_patch
+    from .material import Material
+
+    b = make_boundaries(spec, Functions(), Material.from_spec(spec.material))
+    facets = surface.vertices[surface.faces]
+    for bc in [*b.prescribed, *b.loads]:
+        select_patch(bc.region, facets, bc.name)
+    return check_holds(b.prescribed, surface)
+
+
 def run(
     spec: JobSpec | dict | str | bytes,
     mesh: MeshInput = None,

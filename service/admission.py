@@ -124,6 +124,17 @@ def _engine_error(message: str, source: list | None = None) -> dict[str, Any]:
     return _error(["body", "spec", *path], reason)
 
 
+def _boundary_error(message: str, spec) -> dict[str, Any]:
+    """A boundary check's error at ``boundaries.<i>`` of the boundary it begins with (its ``name``, or
+    ``boundaries.<i>`` when it has none), or at ``boundaries`` for one about several ('clamp and pull:
+    both prescribe u_x ...'); the message keeps the name."""
+    head = message.partition(": ")[0]
+    index: dict[str, int] = {}
+    for i, b in enumerate(spec.boundaries):
+        index.setdefault(b.name or f"boundaries.{i}", i)
+    return _error(["body", "spec", "boundaries", *([index[head]] if head in index else [])], message)
+
+
 def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: str | None, settings: Settings) -> Admitted:
     """Validate a submission; raise :class:`Rejected` (422, 413) naming every problem found.
 
@@ -136,7 +147,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.method import method_entry
-    from engine.pipeline import estimate_memory, load_geometry
+    from engine.pipeline import check_boundaries, estimate_memory, load_geometry
 
     spec = parse_spec(spec_text)
     try:
@@ -203,6 +214,10 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
                                     f"a {shape} grid needs about {need / 2**30:.2f} GiB for method '{spec.method.kind}', "
                                     f"over this server's limit of {limit / 2**30:.2f} GiB per job; "
                                     "increase grid.cell_size or lower grid.resolution")])
+    try:  # as `voxelastic validate`: a region holding no surface used to be a 202 and a failed job
+        check_boundaries(spec, surface)
+    except VoxelasticError as exc:
+        raise Rejected(422, [_boundary_error(str(exc), spec)]) from None
     return Admitted(spec_json=spec.to_json(), suffix=suffix, triangles=triangles, grid_shape=tuple(grid.shape),
                     memory_estimate=need, mesh_field=spec.geometry.mesh, precision=spec.solver.precision,
                     arch=spec.solver.arch)

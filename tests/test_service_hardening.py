@@ -259,3 +259,20 @@ def test_a_mesh_that_needs_more_memory_than_the_admission_limit_is_413(tmp_path,
         assert srv.wait(srv.submit_ok(cantilever(16)))["status"] == "succeeded"
     finally:
         srv.close()
+
+
+def test_boundaries_that_run_would_refuse_are_422_at_submission(server):
+    # they were accepted (202) and the job failed in the worker: `voxelastic validate` refused them
+    spec = cantilever(16)
+    spec["boundaries"][1]["region"] = {"box": [[5, 5, 5], [6, 6, 6]]}
+    err = only_error(post(server.client, spec))
+    assert err["loc"] == ["body", "spec", "boundaries", 1]
+    assert err["msg"].startswith("tip_load: the region holds no part of the mesh surface (its region is 8.001 m from")
+    del spec["boundaries"][1]["name"]
+    err = only_error(post(server.client, spec))
+    assert err["loc"] == ["body", "spec", "boundaries", 1] and err["msg"].startswith("boundaries.1: the region holds no")
+    spec = cantilever(16)
+    spec["boundaries"].append({**spec["boundaries"][0], "name": "pull", "value": [0.001, None, None]})
+    err = only_error(post(server.client, spec))
+    assert err["loc"] == ["body", "spec", "boundaries"]
+    assert err["msg"].startswith("clamp and pull: both prescribe u_x on the same 0.08 m^2 of the surface")
