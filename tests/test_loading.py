@@ -369,3 +369,19 @@ def test_every_mesh_error_names_geometry_mesh_and_placement_errors_their_own_fie
         load_surface(b"", filename="c.stl", scale=-1.0)
     with pytest.raises(GeometryError, match=r"^geometry\.transform: 'c.stl': transform must be rigid"):
         load_surface(b"", filename="c.stl", transform=np.diag([2.0, 1, 1, 1]))
+
+
+TET_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+TET_OFF = b"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
+TET_PLY = (b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+           b"element face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+           b"3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")
+
+
+@pytest.mark.parametrize("filename, text", [("t.obj", TET_OBJ), ("t.off", TET_OFF), ("t.ply", TET_PLY)])
+def test_a_text_mesh_behind_a_utf8_byte_order_mark_reads_as_without(filename, text):
+    # an OBJ saved by a Windows editor: the mark hid its first vertex ("not a valid OBJ file")
+    plain = load_surface(text, filename=filename)
+    marked = load_surface(b"\xef\xbb\xbf" + text, filename=filename)
+    assert marked.faces.tolist() == plain.faces.tolist() and marked.vertices.tolist() == plain.vertices.tolist()
+    assert marked.enclosed_volume() == pytest.approx(1 / 6)

@@ -31,6 +31,7 @@ Placement: ``x' = R (scale * x) + t`` -- the uniform scale first, then the rigid
 
 from __future__ import annotations
 
+import codecs
 import io
 import os
 import re
@@ -60,6 +61,9 @@ MeshSource = str | os.PathLike | bytes | trimesh.Trimesh | trimesh.Scene
 # 'field.path: reason', as the service splits engine messages
 _FIELD = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)*: ")
 _COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D; also inside .gz, .bz2, .xz, .zip, .tar"
+# text formats whose first line trimesh misreads behind a UTF-8 byte-order mark (Windows editors
+# write one): an OBJ starting "\ufeffv 0 0 0" lost its first vertex and was "not a valid OBJ file"
+_BOM_FORMATS = {"obj", "off", "ply"}
 # formats that are ZIP archives themselves: their members are inflated by trimesh's loader
 _ZIP_FORMATS = {"3mf", "3dxml"}
 # a hint for formats whose files commonly fail for a reason the user can fix
@@ -132,6 +136,8 @@ def _load_surface(source, filename, dimension, scale, transform, max_inflated_by
             if t == "stl":
                 d, fixes = fix_binary_count(n, d)
                 notes += fixes
+            elif t in _BOM_FORMATS and d.startswith(codecs.BOM_UTF8):
+                d = d[len(codecs.BOM_UTF8):]
             read.append((n, d, t))
         # trimesh computes normals of whatever it reads: non-finite input is refused by _checked_arrays
         with np.errstate(invalid="ignore", over="ignore"):
