@@ -37,7 +37,7 @@ def _read_spec(path: str):
     from .files import read_input
 
     try:
-        return parse_job(read_input(path))
+        return parse_job(read_input(path, pipe=True))
     except OSError as exc:
         return [f"cannot read job file '{path}': {exc.strerror or exc}"]
     except SpecError as exc:

@@ -169,6 +169,10 @@ def test_a_device_named_as_the_job_or_the_mesh_is_refused_not_read(tmp_path):
         assert line == f"error: geometry.mesh: cannot read '{tmp_path / 'zero.stl'}': {device}", line
     line = one_error_line(cli("voxelize", tmp_path / "zero.stl", "--resolution", "8", "-o", tmp_path / "v.h5", timeout=60))
     assert line == f"error: geometry.mesh: cannot read 'zero.stl': {device}", line
+    # a pipe as the mesh waited for a writer forever
+    os.mkfifo(tmp_path / "pipe.stl")
+    line = one_error_line(cli("voxelize", tmp_path / "pipe.stl", "--resolution", "8", "-o", tmp_path / "v.h5", timeout=60))
+    assert line == "error: geometry.mesh: cannot read 'pipe.stl': it is a pipe, not a file", line
     # a pipe is read: a spec handed over on standard input (its mesh named by an absolute path)
     data["geometry"]["mesh"] = str(tmp_path / "cantilever.stl")
     piped = subprocess.run([sys.executable, "-m", "engine.cli", "validate", "/dev/stdin"], input=json.dumps(data),
