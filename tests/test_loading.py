@@ -385,3 +385,13 @@ def test_a_text_mesh_behind_a_utf8_byte_order_mark_reads_as_without(filename, te
     marked = load_surface(b"\xef\xbb\xbf" + text, filename=filename)
     assert marked.faces.tolist() == plain.faces.tolist() and marked.vertices.tolist() == plain.vertices.tolist()
     assert marked.enclosed_volume() == pytest.approx(1 / 6)
+
+
+def test_the_enclosed_volume_of_a_part_far_from_the_origin_does_not_cancel_away():
+    # a 1 m bar at 1e7 m enclosed -1.9e6 m^3 about the origin: the run warned "the solid is thin for
+    # this grid ... -1.9e+06 cells", and DG that the surface "intersects itself"
+    bar = trimesh.creation.box((1, 0.2, 0.2))
+    bar.apply_translation((1e7, -1e7, 1e7))
+    surface = load_surface(bar.export(file_type="obj").encode(), filename="bar.obj")
+    assert surface.enclosed_volume() == pytest.approx(0.04, rel=1e-6)  # the OBJ keeps 8 decimals
+    assert not surface.warnings

@@ -37,8 +37,13 @@ class Surface:
         return used.min(axis=0), used.max(axis=0)
 
     def enclosed_volume(self) -> float:
-        """Signed volume (3D, [m^3]) or area (2D, [m^2]) by the divergence theorem."""
+        """Signed volume (3D, [m^3]) or area (2D, [m^2]) by the divergence theorem, about the mean of
+        the facets' corners: a closed surface encloses the same about any point, but about the origin
+        the terms of a part far from it cancel (a 1 m bar at 1e7 m came out at -1.9e6 m^3), and an
+        open surface's measure should not move with the part."""
         p = self.vertices[self.faces]
+        if len(p):
+            p = p - p.reshape(-1, self.dim).mean(axis=0)
         if self.dim == 3:
             return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
         return float((p[:, 0, 0] * p[:, 1, 1] - p[:, 1, 0] * p[:, 0, 1]).sum() / 2.0)
