@@ -388,10 +388,27 @@ def test_a_text_mesh_behind_a_utf8_byte_order_mark_reads_as_without(filename, te
 
 
 def test_the_enclosed_volume_of_a_part_far_from_the_origin_does_not_cancel_away():
-    # a 1 m bar at 1e7 m enclosed -1.9e6 m^3 about the origin: the run warned "the solid is thin for
-    # this grid ... -1.9e+06 cells", and DG that the surface "intersects itself"
+    # a 1 m bar at 1e7 m enclosed -1.9e6 m^3 about the origin (the run warned "the solid is thin for
+    # this grid ... -1.9e+06 cells", and DG that the surface "intersects itself"), at 3e6 m -9.1e3 m^3
     bar = trimesh.creation.box((1, 0.2, 0.2))
-    bar.apply_translation((1e7, -1e7, 1e7))
+    bar.apply_translation((3e6, -3e6, 3e6))
     surface = load_surface(bar.export(file_type="obj").encode(), filename="bar.obj")
     assert surface.enclosed_volume() == pytest.approx(0.04, rel=1e-6)  # the OBJ keeps 8 decimals
     assert not surface.warnings
+
+
+def test_a_part_too_far_from_the_origin_for_its_size_is_refused_naming_where_it_lies():
+    # a 1 m bar at 1e9 m ran, 23% off (DG 5%), with no warning
+    bar = trimesh.creation.box((1, 0.2, 0.2))
+    bar.apply_translation((1e9, 0, 0))
+    with pytest.raises(GeometryError) as info:
+        load_surface(bar.export(file_type="obj").encode(), filename="bar.obj")
+    assert str(info.value) == (
+        "geometry.mesh: 'bar.obj' lies 1e+09 m from the origin, 1e+09 times its size (1 m): there double precision "
+        "keeps too few digits of its shape (at most 1e+07 times its size); move it towards the origin (the "
+        "translation of geometry.transform, or in the file)")
+    bar.apply_translation((-1e9, 0, 0))
+    away = np.eye(4)
+    away[0, 3] = 1e9
+    with pytest.raises(GeometryError, match=r"^geometry\.transform: 'bar\.obj' lies 1e\+09 m from the origin"):
+        load_surface(bar.export(file_type="obj").encode(), filename="bar.obj", transform=away)
