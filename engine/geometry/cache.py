@@ -19,7 +19,7 @@ from typing import Any, Callable, TypeVar
 T = TypeVar("T")
 
 # Bump when the output of any cached computation changes.
-GEOMETRY_VERSION = "4"
+GEOMETRY_VERSION = "5"
 
 
 def cache_key(kind: str, mesh_bytes: bytes, params: dict[str, Any]) -> str:

@@ -122,10 +122,12 @@ def slice_cells(surface: Surface, grid: Grid, degree: int = 4, *, min_fraction: 
     # Cut in the grid's own frame (origin at 0): manifold3d's tolerances and the grid-plane tests
     # scale with the coordinates' magnitude, and a part placed 1e6 m from the origin (survey
     # coordinates) lost its interfaces (elements left unconnected, a silently wrong solution).
-    shift = np.asarray(grid.origin, dtype=float)
+    # And in its units (cells of size 1): manifold3d's splits lose solids of about 1e-12 in size,
+    # and a part 1e-11 m long (cells of 6e-13 m) came out with no piece at all.
+    shift, h = np.asarray(grid.origin, dtype=float), float(grid.spacing)
     world = grid
-    grid = replace(grid, origin=(0.0,) * 3)
-    surface = replace(surface, vertices=np.asarray(surface.vertices, dtype=float) - shift)
+    grid = replace(grid, origin=(0.0,) * 3, spacing=1.0)
+    surface = replace(surface, vertices=(np.asarray(surface.vertices, dtype=float) - shift) / h)
     clock = time.perf_counter()
     # Workers boot while the solid is built and cut in two.
     procs = start_workers(_auto_workers(surface, grid) if workers is None else workers)
@@ -139,15 +141,16 @@ def slice_cells(surface: Surface, grid: Grid, degree: int = 4, *, min_fraction: 
     # no warning: pieces below round-off (a cube's faces on grid planes leave a dozen of 1e-18 m^3)
     # change no result and ask nothing of the user; the merged slivers above it keep theirs
     stats["dropped"] = sum(d["dropped"] for d in digests)
-    stats["dropped_volume"] = sum(d["dropped_volume"] for d in digests)
+    stats["dropped_volume"] = sum(d["dropped_volume"] for d in digests) * h**3
     stats["manifold"] = stamp - clock
     stats["bisect"] = time.perf_counter() - stamp
     stats.update(info)
     stamp = time.perf_counter()
     cut = _assemble(digests, grid, int(degree), warnings, stats)
     stats["moments_and_faces"] = time.perf_counter() - stamp
-    # moments are about cell centres in units of h: only the surface pieces move back
-    return replace(cut, grid=world, boundary_triangles=cut.boundary_triangles + shift)
+    # moments are about cell centres in units of h: the measures and the surface pieces go back to metres
+    return replace(cut, grid=world, volume=cut.volume * h**3, face_area=cut.face_area * h**2,
+                   boundary_triangles=cut.boundary_triangles * h + shift)
 
 
 def _check_surface(surface: Surface) -> None:
