@@ -412,3 +412,13 @@ def test_a_part_too_far_from_the_origin_for_its_size_is_refused_naming_where_it_
     away[0, 3] = 1e9
     with pytest.raises(GeometryError, match=r"^geometry\.transform: 'bar\.obj' lies 1e\+09 m from the origin"):
         load_surface(bar.export(file_type="obj").encode(), filename="bar.obj", transform=away)
+
+
+@pytest.mark.parametrize("scale, words", [(1e-61, "geometry.scale: scaled by 1e-61, 'bar.obj' is 1e-61 m across; at least 1e-60 m is supported"),
+                                          (1e61, "geometry.scale: scaled by 1e+61, 'bar.obj' reaches coordinates of 5e+60 m; at most 1e+60 m is supported")])
+def test_parts_beyond_the_sizes_the_arithmetic_holds_are_refused(scale, words):
+    # at 1e80 m the staggered strain fit raised a LinAlgError, at 1e-80 m every boundary lost its patch
+    bar = trimesh.creation.box((1, 0.2, 0.2))
+    with pytest.raises(GeometryError) as info:
+        load_surface(bar.export(file_type="obj").encode(), filename="bar.obj", scale=scale)
+    assert str(info.value) == words

@@ -17,9 +17,13 @@ from engine.geometry.surface import Surface
 # its bounding-box extent^d.
 RIGID_TOL = 1e-9
 FLAT_TOL = 1e-12
-# Largest coordinate magnitude after placement [m]: volumes and moments multiply three
-# coordinates (and their powers), which overflow float64 long before the coordinates do.
-MAX_COORDINATE = 1e100
+# Largest coordinate magnitude and smallest size after placement [m]: volumes, moments and the
+# solvers' norms multiply coordinates (and their powers), which overflow or underflow float64 long
+# before the coordinates do. The bundled bar solved to the same scaled answer (1e-11) at sizes of
+# 1e-70 .. 1e70 m; at 1e80 m the strain fit overflowed (a LinAlgError), at 1e-80 m the boundary
+# patches vanished ("the region holds no part of the mesh surface ... 0 m from the nearest vertex").
+MAX_COORDINATE = 1e60
+MIN_SIZE = 1e-60
 # Farthest a part may lie from the origin, in multiples of its size: the grid, its samples and the
 # boundary patches are computed in world coordinates, which keep 16 digits; a 1 m bar at 1e9 m came
 # out 23% off (DG 5%) with no word, at 1e8 m within 1.2e-7
@@ -62,6 +66,8 @@ def place(points: np.ndarray, scale: float, transform, name: str) -> tuple[np.nd
         raise GeometryError(f"{blame}'{name}' reaches coordinates of {reach:.3g} m; at most {MAX_COORDINATE:g} m is "
                             "supported")
     size = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 0.0
+    if 0 < size < MIN_SIZE:
+        raise GeometryError(f"{blame}'{name}' is {size:.3g} m across; at least {MIN_SIZE:g} m is supported")
     if size > 0 and reach > MAX_DISTANCE_OVER_SIZE * size:
         where = "geometry.transform: " if transform is not None else ""
         raise GeometryError(f"{where}'{name}' lies {reach:.3g} m from the origin, {reach / size:.3g} times its size "
