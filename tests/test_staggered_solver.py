@@ -105,6 +105,22 @@ def test_jacobi_pcg_takes_over_when_the_v_cycle_fails(monkeypatch):
     assert np.abs(a - b).max() <= 1e-6 * np.abs(b).max()
 
 
+def test_a_jacobi_fallback_that_fails_too_is_an_error_that_does_not_say_it_solved(monkeypatch):
+    """With the V-cycle and Jacobi both broken the job fails, and the warnings it carries do not
+    claim the fallback solved it (they did before the fallback ran)."""
+    from engine.staggered import multigrid
+    from engine.staggered.elasticity import StaggeredElasticity
+
+    def nan(self, r, z):
+        z.from_numpy(np.full_like(z.to_numpy(), np.nan))
+
+    monkeypatch.setattr(multigrid.Multigrid, "precondition", nan)
+    monkeypatch.setattr(StaggeredElasticity, "_jacobi", nan)
+    with pytest.raises(SolverError) as caught:
+        run(cantilever(), STL, cache=GeometryCache(None))
+    assert not any("solved with Jacobi" in w for w in getattr(caught.value, "warnings", [])), caught.value.warnings
+
+
 # --- CG: the tolerance is met by the true residual --------------------------------------------------
 
 

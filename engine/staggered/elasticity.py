@@ -410,9 +410,10 @@ class StaggeredElasticity(StaggeredFields):
                     # only need more iterations to reach the same limit (at 256^3 in f32: 200 more)
                     raise
                 # the V-cycle failed (lost definiteness, stagnated): plain Jacobi-PCG is slower but robust
-                self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")
                 x = start()
                 _, stats = self._cg(self._jacobi).solve(b, x, on_iteration)
+                # said only once it is true: a fallback that fails too raises its own error below
+                self.warnings.append(f"multigrid-preconditioned CG failed ({exc}); solved with Jacobi-preconditioned CG")
         except SolverError as exc:
             # bodies joined through a point or an edge of the grid are nearly free: the solve stalls
             # (two bodies touching at a point: "stagnated at relative residual 1.53") for no fault of the tolerance
