@@ -15,6 +15,7 @@ from engine.errors import BoundaryError
 from engine.pipeline import Functions
 from engine.regions import Halfspaces
 from tests.conftest import surface_of
+from verification.held import clamped_sphere_error
 
 L, W = 10.0, 1.0
 E, NU, RHO, G = 1.0e9, 0.3, 1000.0, 9.81
@@ -247,34 +248,6 @@ def test_a_solid_thin_for_its_grid_is_a_warning_only_there():
     assert len(thin) == 1 and "is 0.95 cells of h = 0.5 m" in thin[0] and "method.kind 'dg'" in thin[0]
     r = simulate(bar_job({"kind": "staggered"}, 0.25, [CLAMP]), bar_stl(), filename="bar.stl")
     assert not any("thin for this grid" in w for w in r.solver.warnings)  # 1.9 cells
-
-
-def clamped_sphere_error(nu: float, h: float, method: dict | None = None) -> tuple[float, list[str]]:
-    """Thick sphere a = 0.5, b = 1 (E = 1), pressure 1 inside, the outer surface held (u = 0 on the
-    surface where |x| > 0.98): u = (A r + B / r^2) e_r, A = -B, B = 1 / ((3 lambda + 2 mu) + 4 mu / a^3).
-    Relative L2 error at 500 probes in 0.55 < r < 0.95 at cell size ``h``, and the job's warnings."""
-    a, b = 0.5, 1.0
-    lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))
-    B = 1.0 / ((3 * lam + 2 * mu) + 4 * mu / a**3)
-    outer = trimesh.creation.icosphere(subdivisions=5, radius=b)
-    inner = trimesh.creation.icosphere(subdivisions=5, radius=a)
-    inner.invert()
-    mesh = trimesh.util.concatenate([outer, inner]).export(file_type="stl")
-    x = np.random.default_rng(3).uniform(-1, 1, (20000, 3))
-    r = np.linalg.norm(x, axis=1)
-    probes = x[(r > 0.55) & (r < 0.95)][:500]
-    rp = np.linalg.norm(probes, axis=1)
-    exact = ((-B * rp + B / rp**2) / rp)[:, None] * probes
-    spec = {"dimension": 3, "geometry": {"mesh": "s.stl"}, "grid": {"cell_size": h, "padding": 1},
-            "method": method or {"kind": "staggered"}, "material": {"youngs_modulus": 1.0, "poisson_ratio": nu},
-            "boundaries": [{"kind": "pressure", "name": "inner", "value": 1.0,
-                            "region": {"sphere": {"center": [0, 0, 0], "radius": 0.75}}},
-                           {"kind": "displacement", "name": "clamp", "value": [0, 0, 0], "region": {"all": True}}],
-            "solver": {"rtol": 1e-10}, "output": {"fields": ["displacement"], "probes": probes.tolist(), "surface": False}}
-    fn = Functions(regions={"clamp": lambda p: np.linalg.norm(p, axis=1) > 0.98})
-    result = simulate(spec, mesh, filename="s.stl", functions=fn)
-    u = result.fields.probes["displacement"]
-    return float(np.sqrt(np.sum((u - exact) ** 2) / np.sum(exact**2))), result.solver.warnings
 
 
 def test_clamped_thick_sphere_converges_at_second_order():

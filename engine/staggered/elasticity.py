@@ -35,7 +35,8 @@ from . import kernels, sampling
 from .fields import StaggeredFields
 from .joined import JOINED, joined_bodies_warning
 from .multigrid import Multigrid
-from .nitsche import hold_patches, locking_warning, make_surface_operator
+from . import held
+from .nitsche import hold_patches
 from .operator import Level, dof_bodies, make_fine_level
 from .problem import solves_directly
 from .shares import patch_shares
@@ -146,10 +147,10 @@ class StaggeredElasticity(StaggeredFields):
         points = self.sample_points()
         # displacement boundaries act on their surface patches, weakly (Nitsche): every active DOF is free
         say("boundaries", 0.3)
-        self.surface_terms = make_surface_operator(level, self.hold) if self.hold is not None else None
+        self.surface_terms = held.surface_operator(level, self.hold, self.patches) if self.hold is not None else None
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += check_holds(self.prescribed, self.surface)
-        self.warnings += locking_warning(self.patches, np.asarray(grid.origin, dtype=float), grid.spacing, lam, mu)
+        self.warnings += held.locking_warning(self.patches, self.hold, self.surface_terms, lam, mu)
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
         joined = joined_bodies_warning(self.surface, level, grid)
         self.warnings += joined

@@ -50,42 +50,46 @@ from .sampling import _corner_weights, _corners, _unique_rows, renormalised
 TAU = 0.5  # a point's source cell is its own when that cell's fill reaches this
 COERCIVITY = 8.0  # gamma_s over the smallest penalty that keeps a_N(v, v) >= a(v, v) / 2 (twice it)
 MIN_FILL = 1e-3  # the fill a source cell is taken to have when no edge of a pair holds material
-# lambda / mu (nu 0.476) above which a hold off the grid planes is a warning: on the clamped thick
-# sphere at h = 1/40 the error is 1.9x nu 0.3's at nu 0.47 (lambda / mu 16), 2.6x at 0.48 (24)
-LOCKING_RATIO = 20.0
 
 
 @dataclass(frozen=True)
 class HoldQuadrature:
     """Quadrature of every displacement patch: points [Q, d] [m], weights [Q] [m^2 | m], unit
-    outward normals [Q, d], prescribed components mask [Q, d] (0 / 1) and values [Q, d] [m]
-    (0 where free)."""
+    outward normals [Q, d], prescribed components mask [Q, d] (0 / 1), values [Q, d] [m] (0 where
+    free) and the boundary of each point [Q] (its index among the patches')."""
 
     points: np.ndarray
     weights: np.ndarray
     normals: np.ndarray
     mask: np.ndarray
     values: np.ndarray
+    owner: np.ndarray
+
+    def subset(self, keep: np.ndarray) -> HoldQuadrature:
+        """The points where ``keep`` [Q] (bool)."""
+        return HoldQuadrature(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
 
 @dataclass(frozen=True)
 class HoldPatches:
     """The displacement boundaries' patches (pieces [M_k, d, d] per boundary), from which each
     multigrid level takes a quadrature fitted to its own spacing (:meth:`quadrature`): a coarse
-    level's preconditioning operator needs no fine quadrature (4x fewer points per level)."""
+    level's preconditioning operator needs no fine quadrature (4x fewer points per level); and the
+    whole surface they lie on (every level's apertures, ``held``)."""
 
     prescribed: tuple[Prescribed, ...]
     pieces: tuple[np.ndarray, ...]
+    surface: Surface | None = None
 
     def quadrature(self, spacing: float, merge: bool = False) -> HoldQuadrature:
         """The rule of :func:`engine.boundary.surface_quadrature` at ``spacing`` [m] on every patch;
         ``merge`` for a coarse level's (pieces much smaller than its cells merged into clusters)."""
         parts = []
-        for bc, pieces in zip(self.prescribed, self.pieces):
+        for k, (bc, pieces) in enumerate(zip(self.prescribed, self.pieces)):
             d = pieces.shape[-1]
             x, w, n = surface_quadrature(pieces, spacing, merge=merge)
             mask = np.broadcast_to(bc.mask(d).astype(float), (len(w), d))
-            parts.append((x, w, n, mask, bc.values(x)))
+            parts.append((x, w, n, mask, bc.values(x), np.full(len(w), k)))
         return HoldQuadrature(*(np.concatenate(p) for p in zip(*parts)))
 
 
@@ -97,34 +101,7 @@ def hold_patches(prescribed: list[Prescribed], surface: Surface) -> HoldPatches 
     d = surface.dim
     facets = surface.vertices[surface.faces]
     pieces = tuple(select_patch(bc.region, facets, bc.name)[0].reshape(-1, d, d) for bc in prescribed)
-    return HoldPatches(tuple(prescribed), pieces)
-
-
-def locking_warning(patches: HoldPatches | None, origin: np.ndarray, h: float, lam: float, mu: float) -> list[str]:
-    """A warning naming the displacement boundaries whose patch leaves the grid planes when lambda /
-    mu [-] exceeds LOCKING_RATIO: there these holds lock (docs/design-notes.md, "Held surfaces near
-    incompressibility"); a patch whose pieces each lie in a plane of cell faces does not. ``origin``
-    [d] [m] and ``h`` [m]: the grid's."""
-    if patches is None or lam <= LOCKING_RATIO * mu:
-        return []
-    names = [bc.name for bc, pieces in zip(patches.prescribed, patches.pieces) if not _on_grid_planes(pieces, origin, h)]
-    if not names:
-        return []
-    nu = lam / (2.0 * (lam + mu))
-    return [f"{', '.join(names)}: a surface held off the grid's planes at poisson_ratio {nu:.4g}: the staggered "
-            "method's holds lock as nu -> 1/2, most where the body is confined (a thick sphere clamped on its curved "
-            "surface, h = 1/40: error 2.6x nu 0.3's at nu 0.48, 76x at 0.4999, where it no longer converges; the "
-            "bundled cantilever's tip 6.9% under DG k = 2's at 0.4999, 3.1% at 0.3): use method.kind 'dg' with "
-            "method.degree 2 (locking-free: 1.3x nu 0.3's error at 0.4999, h = 1/8)"]
-
-
-def _on_grid_planes(pieces: np.ndarray, origin: np.ndarray, h: float) -> bool:
-    """Whether every piece [M, d, d] lies in a plane of cell faces (all its vertices share one
-    coordinate, a whole number of cells from ``origin``)."""
-    cells = (pieces - origin) / h  # [M, vertices, d]
-    flat = np.ptp(cells, axis=1) <= 1e-9 * np.maximum(1.0, np.abs(cells).max(axis=1))
-    on_plane = np.abs(cells[:, 0] - np.round(cells[:, 0])) <= 1e-6
-    return bool(np.all((flat & on_plane).any(axis=1)))
+    return HoldPatches(tuple(prescribed), pieces, surface)
 
 
 @dataclass
@@ -139,6 +116,9 @@ class SurfaceOperator:
     flux: sp.csr_matrix
     stress: sp.csr_matrix
     rhs: np.ndarray
+    # the points (of the quadrature it was made from) in cut cells off the grid's planes that keep the
+    # full terms although lambda / mu calls for the finite-volume divergence (``held``); None: no such call
+    kept: np.ndarray | None = None
 
     def matrix(self) -> sp.csr_matrix:
         """S assembled [n, n] (for the coarsest level's factorisation and for tests)."""
@@ -151,9 +131,32 @@ class SurfaceOperator:
         return self.mass.diagonal() - 2.0 * b
 
 
-def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None = None) -> SurfaceOperator:
+def combined(parts: list[SurfaceOperator], size: int, extra: tuple[np.ndarray, sp.spmatrix, np.ndarray] | None = None
+             ) -> SurfaceOperator:
+    """One operator of the sum of ``parts`` (each on its own DOFs; their stresses and fluxes side by
+    side) and ``extra`` = (sample keys a * size + position [k], a symmetric matrix [k, k] added to the
+    mass, its load [k])."""
+    keys = [p.comp.astype(np.int64) * size + p.pos for p in parts]
+    if extra is not None:
+        keys.append(extra[0])
+    every = np.unique(np.concatenate(keys))
+    n = len(every)
+    maps = [sp.csr_matrix((np.ones(len(k)), (np.searchsorted(every, k), np.arange(len(k)))), (n, len(k))) for k in keys]
+    mass = sum((m @ p.mass @ m.T for m, p in zip(maps, parts)), sp.csr_matrix((n, n)))
+    rhs = sum((m @ p.rhs for m, p in zip(maps, parts)), np.zeros(n))
+    if extra is not None:
+        mass = mass + maps[-1] @ extra[1] @ maps[-1].T
+        rhs = rhs + maps[-1] @ extra[2]
+    flux = sp.hstack([m @ p.flux for m, p in zip(maps, parts)]).tocsr() if parts else sp.csr_matrix((n, 0))
+    stress = sp.vstack([p.stress @ m.T for m, p in zip(maps, parts)]).tocsr() if parts else sp.csr_matrix((0, n))
+    return SurfaceOperator(every // size, every % size, sp.csr_matrix(mass), flux, stress, rhs)
+
+
+def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None = None,
+                          exclude: np.ndarray | None = None) -> SurfaceOperator:
     """The Nitsche terms of ``quad`` on ``level`` (whose ``origin`` must be known); ``lam`` [Pa]: the
-    first Lame parameter of their flux and penalty, the level's by default."""
+    first Lame parameter of their flux and penalty, the level's by default; ``exclude``: layout
+    positions of cells that may not be a point's source cell (their energy does not bound its flux)."""
     d, h, lay = level.dim, level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
     nv = d + len(axis_pairs(d))
@@ -161,7 +164,7 @@ def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None 
     mu = level.mu
     big = traction_bound(lam, mu, d)
     x, w = quad.points, quad.weights
-    src, sources, fill = _sources(level, np.floor((x - origin) / h).astype(np.int64))
+    src, sources, fill = _sources(level, np.floor((x - origin) / h).astype(np.int64), exclude)
     area = np.bincount(src, weights=w, minlength=len(sources))
     gamma = (COERCIVITY * big / h**d) * area / fill  # [sources]
     gw = w * gamma[src]  # w_q gamma_q
@@ -278,9 +281,9 @@ def traction_bound(lam: float, mu: float, d: int) -> float:
     return min(2.0 * mu + d * lam, max(4.0 * mu, 2.0 * lam))
 
 
-def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Source cell of each point given its cell index [Q, d]: (source number [Q], source cell
-    indices [S, d], their fills [S] > 0)."""
+def _sources(level: Level, cell: np.ndarray, exclude: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source cell of each point given its cell index [Q, d] (never one of the positions ``exclude``):
+    (source number [Q], source cell indices [S, d], their fills [S] > 0)."""
     d = level.dim
     cells, cell_of = _unique_rows(cell)
     offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
@@ -288,11 +291,14 @@ def _sources(level: Level, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     # the 3^d blocks of neighbouring cells overlap: each distinct cell's fill once (27 per cell
     # took 0.75 s on the 256^3 shell's fine level)
     distinct, which = _unique_rows(cand.reshape(-1, d))
-    fill = cell_fill(level, distinct)[which].reshape(len(cells), -1)
+    allowed = np.ones(len(distinct), dtype=bool) if exclude is None else ~np.isin(level.layout.positions(distinct), exclude)
+    allowed = allowed[which].reshape(len(cells), -1)
+    fill = cell_fill(level, distinct)[which].reshape(len(cells), -1) * allowed
     if np.any(fill.max(axis=1) <= 0):
         # material thinner than a cell with no edge holding it (a thin wall): take the cells' own
         # fractions; such walls stop the setup with the thin-feature error that names them
-        fill = np.where(fill.max(axis=1, keepdims=True) > 0, fill, _cell_fraction(level, cand.reshape(-1, d)).reshape(fill.shape))
+        fill = np.where(fill.max(axis=1, keepdims=True) > 0, fill,
+                        _cell_fraction(level, cand.reshape(-1, d)).reshape(fill.shape) * allowed)
     if np.any(fill.max(axis=1) <= 0):
         raise BoundaryError("boundaries: a displacement patch lies where the grid resolves no material around it; "
                             "refine the grid")

@@ -1,0 +1,65 @@
+"""Held surfaces near incompressibility (issue 21): the staggered holds with and without the held cut
+cells' finite-volume divergence (engine/staggered/held.py), DG k = 2 beside.
+
+    .venv/bin/python -m benchmarks.held_incompressible sphere --nu 0.3 0.49 0.4999 --h 0.1 0.05 0.025
+    .venv/bin/python -m benchmarks.held_incompressible annulus --nu 0.3 0.4999 --h 0.05 0.025 0.0125
+    .venv/bin/python -m benchmarks.held_incompressible rim --nu 0.3 0.4999 --h 0.1 0.05 0.025 --reference 0.0625
+
+``sphere``/``annulus``: relative L2 error against the exact solution (verification/held.py); ``rim``:
+the sphere clamped below z = 0.3, against DG k = 2 at cell size ``--reference``. Each staggered row
+runs twice: "finite volume" (the engine) and "Nitsche only" (APERTURE_RATIO raised past the job's
+lambda / mu). ``--dg`` adds DG k = 2 rows at the sizes given there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from engine.staggered import held
+from verification import held as cases
+
+
+def _staggered(run, finite_volume: bool):
+    saved = held.APERTURE_RATIO
+    held.APERTURE_RATIO = saved if finite_volume else float("inf")
+    try:
+        return run()
+    finally:
+        held.APERTURE_RATIO = saved
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("case", choices=["sphere", "annulus", "rim"])
+    parser.add_argument("--nu", type=float, nargs="+", default=[0.3, 0.4999])
+    parser.add_argument("--h", type=float, nargs="+", default=[0.1, 0.05])
+    parser.add_argument("--dg", type=float, nargs="*", default=[], help="DG k = 2 cell sizes (sphere, rim)")
+    parser.add_argument("--reference", type=float, default=0.0625, help="rim: DG k = 2's cell size")
+    args = parser.parse_args(argv)
+    dg = {"kind": "dg", "degree": 2}
+    for nu in args.nu:
+        reference = cases.partly_clamped_sphere(nu, args.reference, dg)[0] if args.case == "rim" else None
+        rows = [("finite volume", True), ("Nitsche only", False)]
+        for label, fv in rows:
+            for h in args.h:
+                t = time.perf_counter()
+                if args.case == "sphere":
+                    error = _staggered(lambda: cases.clamped_sphere_error(nu, h)[0], fv)
+                elif args.case == "annulus":
+                    error = _staggered(lambda: cases.clamped_annulus_error(nu, h)[0], fv)
+                else:
+                    error = cases.difference(_staggered(lambda: cases.partly_clamped_sphere(nu, h)[0], fv), reference)
+                print(f"{args.case} nu={nu:g} staggered {label:13s} h={h:g}: {error:.3e} ({time.perf_counter() - t:.1f} s)",
+                      flush=True)
+        for h in args.dg if args.case != "annulus" else []:
+            t = time.perf_counter()
+            if args.case == "sphere":
+                error = cases.clamped_sphere_error(nu, h, dg)[0]
+            else:
+                error = cases.difference(cases.partly_clamped_sphere(nu, h, dg)[0], reference)
+            print(f"{args.case} nu={nu:g} DG k = 2 h={h:g}: {error:.3e} ({time.perf_counter() - t:.1f} s)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

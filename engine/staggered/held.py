@@ -1,0 +1,234 @@
+"""Held cut cells near incompressibility: their volumetric term in finite-volume form.
+
+Near nu = 1/2 the stress is mostly a pressure p = -lambda tr(eps), O(1) where u is O(1 / lambda).
+Read through Nitsche's multilinear trace, a hold's reaction to it is not the energy's own boundary
+force, row by row, and the difference, which no discrete pressure balances, is left to mu: the holds
+lock (docs/design-notes.md, "Held surfaces near incompressibility"). Here a cut cell whose surface is
+all held, with the normal component prescribed, weighs its divergence as a finite volume does,
+
+    int_(cell n solid) div u = sum_faces +- alpha_f h^(d-1) u_f + int_(held surface) g . n,
+
+with exact apertures alpha_f (``geometry.apertures``): the wall's flux is the prescribed one, so the
+wall takes a uniform pressure's reaction by construction and no penalty has to. Its energy
+lambda / 2 (D_S(u) + G_S)^2 / V_S replaces lambda / 2 sum V_c tr(eps_c)^2 over a group S (a cell
+of fill >= TAU, with the held slivers beside it, whose own constraint would pin their few faces),
+and Nitsche holds its points with the mu part alone. Other held points keep the full terms, with
+sources outside the groups (whose energy no longer bounds their flux).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..geometry.apertures import cell_area_vectors, face_apertures
+from ..geometry.surface import Surface
+from .nitsche import TAU, HoldPatches, HoldQuadrature, SurfaceOperator, _cell_fraction, cell_fill, combined, make_surface_operator
+from .operator import Level
+from .sampling import _unique_rows
+
+# lambda / mu (nu 0.476) above which holds left with the full terms are a warning (the clamped sphere's
+# error at h = 1/40 was 1.9x nu 0.3's at nu 0.47, 2.6x at 0.48 with every hold so)
+LOCKING_RATIO = 20.0
+# lambda / mu above which held cut cells take the finite-volume divergence (nu 0.444): on the clamped
+# thick sphere at h = 0.05 the two forms agree at nu 0.45 (4.69e-3), the Nitsche terms alone are 6% better
+# at 0.4 and 2.3x worse at 0.49
+APERTURE_RATIO = 8.0
+AREA_TOLERANCE = 1e-7  # of a cell face: the part of a cell's surface area vector that is not held
+NORMAL_TOLERANCE = 1e-6  # |n - P n|: the hold prescribes the normal component
+
+
+def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, lam: float | None = None
+                     ) -> SurfaceOperator:
+    """The displacement boundaries' terms of ``quad`` on ``level``: Nitsche's (``nitsche``; ``lam`` [Pa]
+    their first Lame parameter, the level's by default), and above lambda / mu = APERTURE_RATIO the
+    held cut cells' finite-volume divergence."""
+    surface = patches.surface
+    if level.lam <= APERTURE_RATIO * level.mu or level.origin is None or surface is None:
+        return make_surface_operator(level, quad, lam)
+    d, h, lay = level.dim, level.spacing, level.layout
+    origin = np.asarray(level.origin, dtype=float)
+    cells, cell_of = _unique_rows(np.floor((quad.points - origin) / h).astype(np.int64))
+    vc = _cell_fraction(level, cells)[cell_of]
+    on_plane = (np.abs(quad.normals).max(axis=1) > 1 - 1e-12) & _on_planes(quad.points, quad.normals, origin, h)
+    cut = (vc > 0) & (vc < 1) & ~on_plane
+    # a cell where the hold leaves the normal free cannot take the prescribed flux
+    off = np.linalg.norm(quad.normals * (1.0 - quad.mask), axis=1) > NORMAL_TOLERANCE
+    groups = _groups(level, _near(cells), lay.positions(cells[np.unique(cell_of[off])]), patches, surface)
+    if groups is None:
+        operator = make_surface_operator(level, quad, lam)
+        operator.kept = cut
+        return operator
+    members, group, qualified = groups
+    in_group = np.isin(lay.positions(cells), lay.positions(qualified))[cell_of]
+    member_pos = lay.positions(members)
+    kept = cut & ~in_group
+    in_group |= ~_has_source(level, cells, member_pos)[cell_of]  # a full hold's points need a source
+    parts = [make_surface_operator(level, quad.subset(in_group), 0.0)] if in_group.any() else []
+    if not in_group.all():
+        parts.append(make_surface_operator(level, quad.subset(~in_group), lam, exclude=member_pos))
+    flux_g = _prescribed_flux(level, quad, in_group, members, group, patches)
+    operator = combined(parts, level.size, _finite_volume(level, surface, members, group, flux_g))
+    operator.kept = kept
+    return operator
+
+
+def locking_warning(patches: HoldPatches | None, quad: HoldQuadrature | None, operator: SurfaceOperator | None,
+                    lam: float, mu: float) -> list[str]:
+    """A warning naming the displacement boundaries part of whose surface off the grid's planes kept
+    Nitsche's full terms (``SurfaceOperator.kept``: cut cells holding free surface too, at a patch's rim,
+    or where the hold leaves the normal free) when lambda / mu [-] exceeds LOCKING_RATIO: there the
+    hold locks (docs/design-notes.md, "Held surfaces near incompressibility")."""
+    if patches is None or operator is None or operator.kept is None or lam <= LOCKING_RATIO * mu:
+        return []
+    kept = np.bincount(quad.owner, weights=quad.weights * operator.kept, minlength=len(patches.prescribed))
+    total = np.bincount(quad.owner, weights=quad.weights, minlength=len(patches.prescribed))
+    named = [f"{bc.name} ({100 * k / t:.2g}% of its surface)" for bc, k, t in zip(patches.prescribed, kept, total) if k > 0]
+    if not named:
+        return []
+    nu = lam / (2.0 * (lam + mu))
+    return [f"{', '.join(named)}: held in cut cells that also hold free surface (a patch's rim) or where the hold "
+            f"leaves the normal free, at poisson_ratio {nu:.4g}: there the staggered method's hold locks as nu -> 1/2 "
+            "(a thick sphere clamped on its outer surface below z = 0.3, h = 1/40: 2.3e-2 from DG k = 2's at nu "
+            "0.4999, 4.7e-3 at 0.3; clamped on the whole surface, with no rim, 1.2x nu 0.3's error): use "
+            "method.kind 'dg' with method.degree 2 (locking-free: 1.3x nu 0.3's error at 0.4999, h = 1/8)"]
+
+
+def _on_planes(points: np.ndarray, normals: np.ndarray, origin: np.ndarray, h: float) -> np.ndarray:
+    """[Q] whether each point lies on a plane of cell faces across its (axis-aligned) normal."""
+    axis = np.abs(normals).argmax(axis=1)
+    x = (points[np.arange(len(points)), axis] - origin[axis]) / h
+    return np.abs(x - np.round(x)) <= 1e-6
+
+
+def _near(cells: np.ndarray) -> np.ndarray:
+    """The distinct cells [k, d] of the 3^d blocks of ``cells``: every cell a patch whose points lie in
+    ``cells`` can cut (points are less than a cell apart)."""
+    d = cells.shape[1]
+    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+    return _unique_rows((cells[:, None, :] + offsets[None]).reshape(-1, d))[0]
+
+
+def _groups(level: Level, cells: np.ndarray, refused: np.ndarray, patches: HoldPatches,
+            surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(members [M, d]: the cells whose volumetric term is replaced, their group [M], the qualifying
+    cells [k, d]: cut cells among ``cells`` whose surface is all held, normal prescribed, not at the
+    layout positions ``refused``), or None when none qualifies."""
+    d, h = level.dim, level.spacing
+    origin = np.asarray(level.origin, dtype=float)
+    vc = _cell_fraction(level, cells)
+    ok = (vc > 0) & (vc < 1) & ~np.isin(level.layout.positions(cells), refused)
+    if not ok.any():
+        return None
+    # the cell's area vector from the apertures is the held pieces' (those prescribing their normal)
+    idx = np.nonzero(ok)[0]
+    eye = np.eye(d, dtype=np.int64)
+    whole = -np.stack([face_apertures(surface, origin, h, a, cells[idx] + eye[a])
+                       - face_apertures(surface, origin, h, a, cells[idx]) for a in range(d)], axis=1) * h ** (d - 1)
+    held = cell_area_vectors(_normal_held_pieces(patches), origin, h, cells[idx])
+    ok[idx] = np.abs(whole - held).max(axis=1) <= AREA_TOLERANCE * h ** (d - 1)
+    # groups: a qualifying cell filled to TAU is its own; a sliver joins the nearest qualifying or full
+    # cell of its 3^d block filled to TAU (fuller first), or keeps the full Nitsche terms without one
+    source = cells.copy()
+    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+    distance = np.abs(offsets).sum(axis=1)
+    slivers = np.nonzero(ok & (vc < TAU))[0]
+    if len(slivers):
+        cand = cells[slivers][:, None, :] + offsets[None]
+        fill = _cell_fraction(level, cand.reshape(-1, d)).reshape(len(slivers), -1)
+        pos = level.layout.positions(cand.reshape(-1, d))
+        big = level.layout.positions(cells[ok & (vc >= TAU)])
+        usable = (fill >= TAU) & ((fill >= 1.0) | np.isin(pos, big).reshape(fill.shape))
+        score = np.where(usable, 10.0 - distance[None, :] + 0.1 * fill, -np.inf)
+        best = score.argmax(axis=1)
+        found = np.isfinite(score[np.arange(len(slivers)), best])
+        source[slivers] = cand[np.arange(len(slivers)), best]
+        ok[slivers[~found]] = False
+    if not ok.any():
+        return None
+    members, where = _unique_rows(np.concatenate([cells[ok], source[ok]]))
+    _, group = _unique_rows(source[ok])
+    member_group = np.empty(len(members), dtype=np.int64)
+    member_group[where] = np.concatenate([group, group])
+    return members, member_group, cells[ok]
+
+
+def _normal_held_pieces(patches: HoldPatches) -> np.ndarray:
+    """The held pieces [M, d, d] whose boundary prescribes their normal component."""
+    out = []
+    for bc, pieces in zip(patches.prescribed, patches.pieces):
+        d = pieces.shape[-1]
+        e = pieces[:, 1:] - pieces[:, :1]
+        n = np.cross(e[:, 0], e[:, 1]) if d == 3 else np.stack([e[:, 0, 1], -e[:, 0, 0]], axis=1)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        out.append(pieces[np.linalg.norm(n * (1.0 - bc.mask(d)), axis=1) <= NORMAL_TOLERANCE])
+    return np.concatenate(out)
+
+
+def _has_source(level: Level, cells: np.ndarray, exclude: np.ndarray) -> np.ndarray:
+    """[C] whether a cell of each one's 3^d block holds material and is not excluded (Nitsche's
+    full terms need such a source cell)."""
+    d = level.dim
+    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
+    cand = (cells[:, None, :] + offsets[None]).reshape(-1, d)
+    usable = (cell_fill(level, cand) > 0) & ~np.isin(level.layout.positions(cand), exclude)
+    return usable.reshape(len(cells), -1).any(axis=1)
+
+
+def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, members: np.ndarray, group: np.ndarray,
+                     patches: HoldPatches) -> np.ndarray:
+    """G_S [groups] [m^d]: int g . n over each group's held surface. The points' rule is corrected by
+    the cells' exact held area vectors so that a constant g gives the exact flux (its points are not
+    clipped to the cells, and a constant field must leave every group without divergence)."""
+    d, h, lay = level.dim, level.spacing, level.layout
+    origin = np.asarray(level.origin, dtype=float)
+    n_groups = int(group.max()) + 1
+    order = np.argsort(lay.positions(members))
+    sorted_pos = lay.positions(members)[order]
+    pos = lay.positions(np.floor((quad.points - origin) / h).astype(np.int64))
+    at = np.minimum(np.searchsorted(sorted_pos, pos), len(order) - 1)
+    on = in_group & (sorted_pos[at] == pos)
+    point_group = group[order[at]][on]
+    g = (quad.mask * quad.values)[on]
+    w = quad.weights[on]
+    wn = w[:, None] * quad.normals[on]
+    sums = lambda v: np.bincount(point_group, weights=v, minlength=n_groups)  # noqa: E731
+    flux = sums(np.einsum("qi,qi->q", wn, g))
+    area = np.stack([sums(wn[:, a]) for a in range(d)], axis=1)
+    mean_g = np.stack([sums(w * g[:, a]) for a in range(d)], axis=1) / np.maximum(sums(w), 1e-300)[:, None]
+    exact = np.zeros((n_groups, d))
+    np.add.at(exact, group, cell_area_vectors(_normal_held_pieces(patches), origin, h, members))
+    return flux + np.einsum("gi,gi->g", mean_g, exact - area)
+
+
+def _finite_volume(level: Level, surface: Surface, members: np.ndarray, group: np.ndarray,
+                   flux_g: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+    """(sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]): the
+    groups' finite-volume divergence D_S in place of their members' lambda / 2 V_c tr(eps_c)^2 (T:
+    the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
+    d, h, lay, size = level.dim, level.spacing, level.layout, level.size
+    origin = np.asarray(level.origin, dtype=float)
+    eye = np.eye(d, dtype=np.int64)
+    volume = _cell_fraction(level, members) * h**d
+    n_groups = len(flux_g)
+    rows, keys, div, trace = [], [], [], []
+    for a in range(d):
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            face = members + side * eye[a]
+            pos = lay.positions(face)
+            live = (pos >= 0) & level.active[a, np.maximum(pos, 0)]
+            alpha = face_apertures(surface, origin, h, a, face[live])
+            rows.append(np.nonzero(live)[0])
+            keys.append(a * size + pos[live])
+            div.append(sign * alpha * h ** (d - 1))
+            trace.append(np.full(live.sum(), sign / h))
+    rows, keys, div, trace = (np.concatenate(v) for v in (rows, keys, div, trace))
+    every, col = np.unique(keys, return_inverse=True)
+    D = sp.csr_matrix((div, (group[rows], col)), (n_groups, len(every)))
+    T = sp.csr_matrix((trace, (rows, col)), (len(members), len(every)))
+    vs = np.bincount(group, weights=volume, minlength=n_groups)
+    lam = level.lam
+    matrix = lam * (D.T @ sp.diags(1.0 / vs) @ D - T.T @ sp.diags(volume) @ T)
+    return every, sp.csr_matrix(matrix), -lam * (D.T @ (flux_g / vs))
