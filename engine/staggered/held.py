@@ -22,6 +22,7 @@ import itertools
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from ..geometry.apertures import cell_area_vectors, face_apertures
 from ..geometry.surface import Surface
@@ -197,7 +198,15 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, m
     sums = lambda v: np.bincount(point_group, weights=v, minlength=n_groups)  # noqa: E731
     flux = sums(np.einsum("qi,qi->q", wn, g))
     area = np.stack([sums(wn[:, a]) for a in range(d)], axis=1)
-    mean_g = np.stack([sums(w * g[:, a]) for a in range(d)], axis=1) / np.maximum(sums(w), 1e-300)[:, None]
+    weight = sums(w)
+    mean_g = np.stack([sums(w * g[:, a]) for a in range(d)], axis=1) / np.maximum(weight, 1e-300)[:, None]
+    empty = np.nonzero(weight <= 0)[0]
+    if len(empty):  # a group whose held surface got no point: g at the point nearest its first cell
+        first = np.zeros(n_groups, dtype=np.int64)
+        first[group[::-1]] = np.arange(len(group))[::-1]
+        centre = origin + h * (members[first[empty]] + 0.5)
+        nearest = cKDTree(quad.points).query(centre)[1]
+        mean_g[empty] = (quad.mask * quad.values)[nearest]
     exact = np.zeros((n_groups, d))
     np.add.at(exact, group, cell_area_vectors(_normal_held_pieces(patches), origin, h, members))
     return flux + np.einsum("gi,gi->g", mean_g, exact - area)
