@@ -89,3 +89,17 @@ def test_area_vectors_of_an_open_patch_add_up_to_its_own():
     whole = 0.5 * np.cross(patch[0, 1] - patch[0, 0], patch[0, 2] - patch[0, 0])
     assert np.abs(parts.sum(axis=0) - whole).max() < 1e-14
     assert np.count_nonzero(np.abs(parts).max(axis=1) > 0) > 10
+
+
+def test_a_face_on_a_plane_of_cell_faces_belongs_to_the_cell_on_its_solid_side():
+    """A box whose faces lie on planes of cell faces: each face's area is in the cell inside it (its
+    aperture there 0: a wall), up- and down-facing alike, and every cell keeps its divergence theorem."""
+    box = trimesh.creation.box(bounds=[[0.2, 0.1, 0.3], [0.7, 0.6, 0.5]])
+    surface = Surface(np.asarray(box.vertices, float), np.asarray(box.faces, np.int64))
+    origin, h = np.zeros(3), 0.1
+    inside = np.array([[2, 1, 3], [6, 5, 4]])  # the cells at the box's low and high corners
+    area = cell_area_vectors(surface.vertices[surface.faces], origin, h, inside)
+    assert np.abs(area - [[-h * h] * 3, [h * h] * 3]).max() < 1e-15
+    assert np.abs(face_apertures(surface, origin, h, 2, np.array([[3, 3, 5], [3, 3, 3], [3, 3, 4]])) - [0, 0, 1]).max() < 1e-14
+    defect, _ = _divergence_defect(surface, origin, h, _block(3, 8))
+    assert defect.max() < 1e-12

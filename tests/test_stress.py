@@ -47,14 +47,15 @@ def test_youngs_modulus_from_1_to_1e9_leaves_the_strains_unchanged(method):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_near_incompressibility_stays_finite_and_converged(method):
-    # measured (quick sizes): staggered tip / beam 0.991 -> 0.896, 19 -> 12 CG iterations (the curl
+    # measured (quick sizes): staggered tip / beam 0.995 -> 0.903, 19 -> 14 CG iterations (the curl
     # smoothing and face transfers above lambda / mu = 4; 213 at 0.499 before them), condition 1.1e6 ->
-    # 2.1e8 from nu 0.3 to 0.499; DG k = 2 0.975 -> 0.900, condition 3.1e6 -> 3.2e8
+    # 2.2e7 from nu 0.3 to 0.499 (2.1e8 while the clamp's cells held the wall by a lambda-scaled penalty,
+    # before their finite-volume divergence); DG k = 2 0.975 -> 0.900, condition 3.1e6 -> 3.2e8
     low, high = S.poisson_case(method, SIZE, 0.3), S.poisson_case(method, SIZE, 0.499)
     assert_passed([low, high])
     assert 0.9 < low.values["ratio"] < 1.05
     assert 0.8 < high.values["ratio"] < low.values["ratio"]  # some locking, no collapse
-    assert high.condition > 50 * low.condition
+    assert high.condition > 10 * low.condition
     if method == "staggered":
         assert high.iterations <= 2 * low.iterations  # the V-cycle no longer degrades as lambda / mu grows
 

@@ -21,6 +21,7 @@ import numpy as np
 from .surface import Surface
 
 CHUNK_BYTES = 32 * 2**20  # the scan's dense [x, y(, z)] arrays per chunk of columns
+PLANE_TOLERANCE = 1e-9  # [cells]: a facet this close to a plane of cell faces lies on it
 
 
 def face_apertures(surface: Surface, origin: np.ndarray, spacing: float, axis: int, faces: np.ndarray) -> np.ndarray:
@@ -67,11 +68,18 @@ def _covers(facets: np.ndarray, origin: np.ndarray, spacing: float, axis: int,
         f = f[:, ::-1]  # reversed segments keep the solid on their left after the swap
     if d == 3:  # facets parallel to the scan axis have no projected area
         e1, e2 = f[:, 1, :2] - f[:, 0, :2], f[:, 2, :2] - f[:, 0, :2]
-        f = f[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) != 0]
+        up = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     else:
-        f = f[f[:, 0, 0] != f[:, 1, 0]]
+        up = f[:, 0, 0] - f[:, 1, 0]
+    f = f[up != 0]
     if not len(f):
         return
+    # a facet lying on a plane of cell faces belongs to the cell on its solid side (whose face there is
+    # then a wall): just below the plane if it faces up, just above if down, whatever the round-off
+    z = f[:, :, -1]
+    flat = (np.ptp(z, axis=1) <= PLANE_TOLERANCE) & (np.abs(z - np.round(z[:, :1])).max(axis=1) <= PLANE_TOLERANCE)
+    side = np.where(up[up != 0] > 0, -PLANE_TOLERANCE, PLANE_TOLERANCE)
+    f[flat, :, -1] = np.round(z[flat, :1]) + side[flat, None]
     # columns of the wanted cells; layers over every facet along the axis (a column sum needs all)
     lo = local[:, :-1].min(axis=0)
     zlo = int(np.floor(f[:, :, -1].min())) - 1

@@ -3,13 +3,15 @@
 Near nu = 1/2 the stress is mostly a pressure p = -lambda tr(eps), O(1) where u is O(1 / lambda).
 Read through Nitsche's multilinear trace, a hold's reaction to it is not the energy's own boundary
 force, row by row, and the difference, which no discrete pressure balances, is left to mu: the holds
-lock (docs/design-notes.md, "Held surfaces near incompressibility"). Here a cut cell whose surface is
-all held, with the normal component prescribed, weighs its divergence as a finite volume does,
+lock (docs/design-notes.md, "Held surfaces near incompressibility"). Here a cut cell holding surface
+held with its normal component prescribed weighs its divergence as a finite volume does,
 
-    int_(cell n solid) div u = sum_faces +- alpha_f h^(d-1) u_f + int_(held surface) g . n,
+    int_(cell n solid) div u = sum_faces +- alpha_f h^(d-1) u_f + int_(held) g . n + N_free . mean(u),
 
 with exact apertures alpha_f (``geometry.apertures``): the wall's flux is the prescribed one, so the
-wall takes a uniform pressure's reaction by construction and no penalty has to. Its energy
+wall takes a uniform pressure's reaction by construction and no penalty has to. The cell's free
+surface, at a patch's rim (area vector N_free, the cell's whole one less the held part's), passes the
+flux of its cell's mean face velocities (mean(u)_a = (u_a(I) + u_a(I + e_a)) / 2). Its energy
 lambda / 2 (D_S(u) + G_S)^2 / V_S replaces lambda / 2 sum V_c tr(eps_c)^2 over a group S (a cell
 of fill >= TAU, with the held slivers beside it, whose own constraint would pin their few faces),
 and Nitsche holds its points with the mu part alone. Other held points keep the full terms, with
@@ -37,8 +39,9 @@ LOCKING_RATIO = 20.0
 # thick sphere at h = 0.05 the two forms agree at nu 0.45 (4.69e-3), the Nitsche terms alone are 6% better
 # at 0.4 and 2.3x worse at 0.49
 APERTURE_RATIO = 8.0
-AREA_TOLERANCE = 1e-7  # of a cell face: the part of a cell's surface area vector that is not held
+AREA_TOLERANCE = 1e-7  # of a cell face: a cell's held area vector this small holds nothing
 NORMAL_TOLERANCE = 1e-6  # |n - P n|: the hold prescribes the normal component
+PLANE_NUDGE = 1e-7  # [cells]: a point moved this far inwards along its normal finds its cell
 
 
 def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, lam: float | None = None
@@ -51,18 +54,15 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
         return make_surface_operator(level, quad, lam)
     d, h, lay = level.dim, level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
-    cells, cell_of = _unique_rows(np.floor((quad.points - origin) / h).astype(np.int64))
-    vc = _cell_fraction(level, cells)[cell_of]
+    cells, cell_of = _unique_rows(_point_cells(quad, origin, h))
     on_plane = (np.abs(quad.normals).max(axis=1) > 1 - 1e-12) & _on_planes(quad.points, quad.normals, origin, h)
-    cut = (vc > 0) & (vc < 1) & ~on_plane
-    # a cell where the hold leaves the normal free cannot take the prescribed flux
-    off = np.linalg.norm(quad.normals * (1.0 - quad.mask), axis=1) > NORMAL_TOLERANCE
-    groups = _groups(level, _near(cells), lay.positions(cells[np.unique(cell_of[off])]), patches, surface)
+    cut = (_cell_fraction(level, cells)[cell_of] > 0) & ~on_plane
+    groups = _groups(level, _near(cells), patches, surface)
     if groups is None:
         operator = make_surface_operator(level, quad, lam)
         operator.kept = cut
         return operator
-    members, group, qualified = groups
+    members, group, qualified, member_free = groups
     in_group = np.isin(lay.positions(cells), lay.positions(qualified))[cell_of]
     member_pos = lay.positions(members)
     kept = cut & ~in_group
@@ -71,7 +71,7 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
     if not in_group.all():
         parts.append(make_surface_operator(level, quad.subset(~in_group), lam, exclude=member_pos))
     flux_g = _prescribed_flux(level, quad, in_group, members, group, patches)
-    operator = combined(parts, level.size, _finite_volume(level, surface, members, group, flux_g))
+    operator = combined(parts, level.size, _finite_volume(level, surface, members, group, flux_g, member_free))
     operator.kept = kept
     return operator
 
@@ -79,9 +79,9 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
 def locking_warning(patches: HoldPatches | None, quad: HoldQuadrature | None, operator: SurfaceOperator | None,
                     lam: float, mu: float) -> list[str]:
     """A warning naming the displacement boundaries part of whose surface off the grid's planes kept
-    Nitsche's full terms (``SurfaceOperator.kept``: cut cells holding free surface too, at a patch's rim,
-    or where the hold leaves the normal free) when lambda / mu [-] exceeds LOCKING_RATIO: there the
-    hold locks (docs/design-notes.md, "Held surfaces near incompressibility")."""
+    Nitsche's full terms (``SurfaceOperator.kept``: cut cells where the hold leaves the normal free, or a
+    sliver with no fuller neighbour) when lambda / mu [-] exceeds LOCKING_RATIO: there the hold locks
+    (docs/design-notes.md, "Held surfaces near incompressibility")."""
     if patches is None or operator is None or operator.kept is None or lam <= LOCKING_RATIO * mu:
         return []
     kept = np.bincount(quad.owner, weights=quad.weights * operator.kept, minlength=len(patches.prescribed))
@@ -90,11 +90,18 @@ def locking_warning(patches: HoldPatches | None, quad: HoldQuadrature | None, op
     if not named:
         return []
     nu = lam / (2.0 * (lam + mu))
-    return [f"{', '.join(named)}: held in cut cells that also hold free surface (a patch's rim) or where the hold "
-            f"leaves the normal free, at poisson_ratio {nu:.4g}: there the staggered method's hold locks as nu -> 1/2 "
-            "(a thick sphere clamped on its outer surface below z = 0.3, h = 1/40: 2.3e-2 from DG k = 2's at nu "
-            "0.4999, 4.7e-3 at 0.3; clamped on the whole surface, with no rim, 1.2x nu 0.3's error): use "
-            "method.kind 'dg' with method.degree 2 (locking-free: 1.3x nu 0.3's error at 0.4999, h = 1/8)"]
+    return [f"{', '.join(named)}: held where the hold leaves the surface's normal component free (or in a "
+            f"sliver cell with no fuller neighbour), at poisson_ratio {nu:.4g}: there the staggered method's hold "
+            "keeps Nitsche's terms, which lock as nu -> 1/2 (a thick sphere clamped on its curved surface with "
+            "them: 76x nu 0.3's error at 0.4999, h = 1/40; 1.2x where the normal is held): hold the normal "
+            "component too, or use method.kind 'dg' with method.degree 2 (locking-free: 1.3x nu 0.3's error at "
+            "0.4999, h = 1/8)"]
+
+
+def _point_cells(quad: HoldQuadrature, origin: np.ndarray, h: float) -> np.ndarray:
+    """The cell [Q, d] of each point, on its solid side where it lies on a plane of cell faces (as the
+    apertures' scan puts such a surface)."""
+    return np.floor((quad.points - origin) / h - PLANE_NUDGE * quad.normals).astype(np.int64)
 
 
 def _on_planes(points: np.ndarray, normals: np.ndarray, origin: np.ndarray, h: float) -> np.ndarray:
@@ -112,24 +119,27 @@ def _near(cells: np.ndarray) -> np.ndarray:
     return _unique_rows((cells[:, None, :] + offsets[None]).reshape(-1, d))[0]
 
 
-def _groups(level: Level, cells: np.ndarray, refused: np.ndarray, patches: HoldPatches,
-            surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surface
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """(members [M, d]: the cells whose volumetric term is replaced, their group [M], the qualifying
-    cells [k, d]: cut cells among ``cells`` whose surface is all held, normal prescribed, not at the
-    layout positions ``refused``), or None when none qualifies."""
+    cells [k, d]: cut cells among ``cells`` holding surface held with its normal prescribed, and the
+    members' free surface's area vectors [M, d] [m^(d-1)]), or None when no cell qualifies."""
     d, h = level.dim, level.spacing
     origin = np.asarray(level.origin, dtype=float)
     vc = _cell_fraction(level, cells)
-    ok = (vc > 0) & (vc < 1) & ~np.isin(level.layout.positions(cells), refused)
+    ok = vc > 0  # full cells too: a held face on a plane of cell faces is their wall
     if not ok.any():
         return None
-    # the cell's area vector from the apertures is the held pieces' (those prescribing their normal)
+    # the cell's surface (its area vector from the apertures) and the part of it held, normal prescribed
     idx = np.nonzero(ok)[0]
     eye = np.eye(d, dtype=np.int64)
     whole = -np.stack([face_apertures(surface, origin, h, a, cells[idx] + eye[a])
                        - face_apertures(surface, origin, h, a, cells[idx]) for a in range(d)], axis=1) * h ** (d - 1)
     held = cell_area_vectors(_normal_held_pieces(patches), origin, h, cells[idx])
-    ok[idx] = np.abs(whole - held).max(axis=1) <= AREA_TOLERANCE * h ** (d - 1)
+    # a cell holding free surface too (a patch's rim) takes that part's flux from its mean face velocities
+    free = np.zeros((len(cells), d))
+    free[idx] = whole - held
+    ok[idx] = np.abs(held).max(axis=1) > AREA_TOLERANCE * h ** (d - 1)
     # groups: a qualifying cell filled to TAU is its own; a sliver joins the nearest qualifying or full
     # cell of its 3^d block filled to TAU (fuller first), or keeps the full Nitsche terms without one
     source = cells.copy()
@@ -153,7 +163,9 @@ def _groups(level: Level, cells: np.ndarray, refused: np.ndarray, patches: HoldP
     _, group = _unique_rows(source[ok])
     member_group = np.empty(len(members), dtype=np.int64)
     member_group[where] = np.concatenate([group, group])
-    return members, member_group, cells[ok]
+    member_free = np.zeros((len(members), d))
+    member_free[where[: int(ok.sum())]] = free[ok]
+    return members, member_group, cells[ok], member_free
 
 
 def _normal_held_pieces(patches: HoldPatches) -> np.ndarray:
@@ -188,7 +200,7 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, m
     n_groups = int(group.max()) + 1
     order = np.argsort(lay.positions(members))
     sorted_pos = lay.positions(members)[order]
-    pos = lay.positions(np.floor((quad.points - origin) / h).astype(np.int64))
+    pos = lay.positions(_point_cells(quad, origin, h))
     at = np.minimum(np.searchsorted(sorted_pos, pos), len(order) - 1)
     on = in_group & (sorted_pos[at] == pos)
     point_group = group[order[at]][on]
@@ -213,7 +225,7 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, m
 
 
 def _finite_volume(level: Level, surface: Surface, members: np.ndarray, group: np.ndarray,
-                   flux_g: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+                   flux_g: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """(sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]): the
     groups' finite-volume divergence D_S in place of their members' lambda / 2 V_c tr(eps_c)^2 (T:
     the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
@@ -231,7 +243,7 @@ def _finite_volume(level: Level, surface: Surface, members: np.ndarray, group: n
             alpha = face_apertures(surface, origin, h, a, face[live])
             rows.append(np.nonzero(live)[0])
             keys.append(a * size + pos[live])
-            div.append(sign * alpha * h ** (d - 1))
+            div.append(sign * alpha * h ** (d - 1) + 0.5 * free[live, a])
             trace.append(np.full(live.sum(), sign / h))
     rows, keys, div, trace = (np.concatenate(v) for v in (rows, keys, div, trace))
     every, col = np.unique(keys, return_inverse=True)
