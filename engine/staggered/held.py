@@ -52,7 +52,7 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
     surface = patches.surface
     if level.lam <= APERTURE_RATIO * level.mu or level.origin is None or surface is None:
         return make_surface_operator(level, quad, lam)
-    d, h, lay = level.dim, level.spacing, level.layout
+    h, lay = level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
     cells, cell_of = _unique_rows(_point_cells(quad, origin, h))
     on_plane = (np.abs(quad.normals).max(axis=1) > 1 - 1e-12) & _on_planes(quad.points, quad.normals, origin, h)
