@@ -1,7 +1,7 @@
 """The CLI's checks before any work, Ctrl-C and probe warnings (issue 18 item 9), as real
 subprocesses: the same limits in validate / voxelize / run (exit 2, one line), an unwritable
 output found before the solve, Ctrl-C as one line with exit 130 and no temporary files left, probes
-outside the solid named in a warning, no note about STL's merged corners."""
+outside the solid named in a warning, no note about STL's merged corners, a binary STL cut short."""
 
 from __future__ import annotations
 
@@ -204,3 +204,21 @@ def test_cells_far_larger_than_the_part_are_refused_not_rounded_away(tmp_path):
     line = one_error_line(cli("voxelize", tmp_path / "rod.stl", "--cell-size", "1000", "-o", tmp_path / "v.h5"))
     assert line.startswith("error: grid.cell_size: no cell holds a share of the solid above round-off"), line
     assert not list(tmp_path.glob("*.h5"))
+
+
+# --- what the entry-point sweep left: a binary STL cut short -----------------------------------
+
+
+def test_a_binary_stl_cut_at_a_record_boundary_is_exit_2_naming_both_counts(tmp_path):
+    # it was read as the records present (a box with a filled hole, an open surface) or, with one or
+    # two records left, "no mesh found (is it a valid STL file?)"
+    import trimesh
+
+    stl = trimesh.load_mesh(STL).export(file_type="stl")
+    path = job(tmp_path)
+    for records in (2, 7):
+        (tmp_path / "cantilever.stl").write_bytes(stl[:84 + 50 * records])
+        size = 84 + 50 * records
+        assert one_error_line(cli("validate", path)) == (
+            f"error: geometry.mesh: cannot read 'cantilever.stl': the binary STL is cut short: its header gives 12 "
+            f"triangles (684 bytes), the file has {size} bytes ({records} whole triangles)")

@@ -308,6 +308,17 @@ def test_a_part_header_over_the_parser_limit_is_400_naming_the_limit(api):
     assert "over 4224 bytes" in err["msg"] and "file name" in err["msg"]
 
 
+def test_a_binary_stl_cut_short_is_422_at_the_mesh_naming_both_counts(api):
+    import trimesh
+
+    stl = trimesh.creation.box(bounds=[[0, -0.05, -0.05], [1, 0.05, 0.05]]).export(file_type="stl")
+    r = post(api, mesh=stl[:84 + 50 * 7])  # at a record boundary: it was read as a box with a hole
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == [{"loc": ["body", "mesh"], "type": "value_error", "msg": (
+        "geometry.mesh: cannot read 'cantilever.stl': the binary STL is cut short: its header gives 12 triangles "
+        "(684 bytes), the file has 434 bytes (7 whole triangles)")}]
+
+
 def test_a_field_sent_twice_is_422_naming_it(api):
     spec = json.dumps(cantilever(16))
     r = api.post("/jobs", data={"spec": spec}, files=[("mesh", ("a.stl", MESH)), ("mesh", ("b.stl", b"garbage"))])

@@ -6,15 +6,19 @@ nothing. Exporters get this wrong in harmless ways -- a count of 0, or a newline
 after the last record -- and common tools (slicers, MeshLab) then take the count from the size.
 ``fix_binary_count`` does the same, so trimesh reads the file, and says what it did:
 
-- the size is 84 + 50 n: n triangles, whatever the header's count;
-- n whole records and fewer than 50 bytes more: the n records, the rest ignored, unless the
-  header's count is larger than n (a file cut short: an error, the missing triangles matter).
+- a header count larger than the whole records present: a file cut short (an interrupted download
+  or copy), an error naming both counts, whether it ends at a record boundary or inside a record:
+  the missing triangles matter, and the records present make an open surface that repair and the
+  winding number would quietly turn into some other solid;
+- otherwise the size is 84 + 50 n, maybe with fewer than 50 bytes more: n triangles, the header's
+  smaller count (0 is common) and the bytes after the last record ignored.
 
-Bytes that merely have the right length are not a mesh: the records read must hold finite
-coordinates of float32 magnitude and share corners (every facet of a solid shares its corners
-with its neighbours, so at most half the corners are distinct; 12-byte corners of random bytes
-never repeat). Anything else is left to
-trimesh, which reports it as not a valid STL file.
+Bytes that merely have the right length are not a mesh: the records must hold finite coordinates
+of float32 magnitude -- enough to call a file cut short, whose records may be too few to meet --
+and, to be read, share corners (every facet of a solid shares its corners with its neighbours, so at
+most half the corners are distinct; 12-byte corners of random bytes never repeat). A file without
+one whole record tells nothing. Anything else is left to trimesh, which reports it as not a valid
+STL file.
 """
 
 from __future__ import annotations
@@ -39,13 +43,17 @@ def fix_binary_count(name: str, data: bytes) -> tuple[bytes, list[str]]:
         return data, []  # too short to hold a triangle, or text (ASCII STL or no STL): trimesh's own reading
     count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
     n, rest = divmod(len(data) - _HEADER, _RECORD)
-    if count * _RECORD == len(data) - _HEADER or not _plausible(data, n):
+    if count * _RECORD == len(data) - _HEADER:
         return data, []
-    if rest and count > n:
+    corners = _corners(data, n)
+    numbers = _coordinates(corners)
+    if count > n and numbers:
         raise GeometryError(
             f"cannot read '{name}': the binary STL is cut short: its header gives {count} triangles"
-            f" ({_HEADER + count * _RECORD} bytes), the file has {len(data)} bytes ({n} whole triangles)"
+            f" ({_HEADER + count * _RECORD} bytes), the file has {len(data)} bytes ({n} whole triangle{'s' * (n != 1)})"
         )
+    if not (numbers and _shared(corners)):
+        return data, []
     if rest:
         given = "as its header gives" if count == n else f"its header gives {count}"
         note = (f"the binary STL '{name}' ends in {rest} bytes that are no whole triangle record: ignored them"
@@ -57,11 +65,18 @@ def fix_binary_count(name: str, data: bytes) -> tuple[bytes, list[str]]:
     return fixed, [note]
 
 
-def _plausible(data: bytes, n: int) -> bool:
-    """Whether the n records after the header look like the facets of a mesh (module docstring)."""
+def _corners(data: bytes, n: int) -> np.ndarray:
+    """The corners [3 n, 3] (float32) of the n records after the header."""
     records = np.frombuffer(data, dtype=np.uint8, count=n * _RECORD, offset=_HEADER).reshape(n, _RECORD)
-    corners = np.ascontiguousarray(records[:, 12:48]).view("<f4").reshape(-1, 3)
+    return np.ascontiguousarray(records[:, 12:48]).view("<f4").reshape(-1, 3)
+
+
+def _coordinates(corners: np.ndarray) -> bool:
+    """Whether the corners are finite numbers of the magnitude a part's coordinates have."""
     with np.errstate(invalid="ignore", over="ignore"):
-        if not (np.isfinite(corners).all() and np.abs(corners).max() < _MAX_COORDINATE):
-            return False
+        return bool(np.isfinite(corners).all() and np.abs(corners).max() < _MAX_COORDINATE)
+
+
+def _shared(corners: np.ndarray) -> bool:
+    """Whether the corners are shared as a mesh's facets share them (module docstring)."""
     return 2 * len(np.unique(corners.view(np.dtype((np.void, 12))))) <= len(corners)
