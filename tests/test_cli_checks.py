@@ -1,7 +1,8 @@
 """The CLI's checks before any work, Ctrl-C and probe warnings (issue 18 item 9), as real
 subprocesses: the same limits in validate / voxelize / run (exit 2, one line), an unwritable
 output found before the solve, Ctrl-C as one line with exit 130 and no temporary files left, probes
-outside the solid named in a warning, no note about STL's merged corners, a binary STL cut short."""
+outside the solid named in a warning, no note about STL's merged corners; text meshes with any line
+ends, a binary STL cut short."""
 
 from __future__ import annotations
 
@@ -206,7 +207,23 @@ def test_cells_far_larger_than_the_part_are_refused_not_rounded_away(tmp_path):
     assert not list(tmp_path.glob("*.h5"))
 
 
-# --- what the entry-point sweep left: a binary STL cut short -----------------------------------
+# --- what the entry-point sweep left: line ends, a binary STL cut short ------------------------
+
+
+def test_a_ply_with_mac_or_doubled_windows_line_ends_validates_as_with_unix_ones(tmp_path):
+    # "\r" made the whole file one line to trimesh (exit 2, "not a valid PLY file"); "\r\r\n" (saved
+    # twice through a Windows text stream) a blank line after every row; "\r\n" itself was read
+    import trimesh
+
+    ply = trimesh.load_mesh(STL).export(file_type="ply", encoding="ascii")
+    path = job(tmp_path, geometry={"mesh": "cantilever.ply", "scale": 1.0})
+    lines = []
+    for mark, end in ((b"", b"\n"), (b"", b"\r"), (b"", b"\r\r\n"), (b"\xef\xbb\xbf", b"\r\n")):
+        (tmp_path / "cantilever.ply").write_bytes(mark + ply.replace(b"\n", end))
+        out = cli("validate", path)
+        assert out.returncode == 0, out.stderr
+        lines.append(out.stdout)
+    assert lines == [f"OK: {path} (3D, method staggered, analysis static, 12 facets, grid 34x9x9)\n"] * 4
 
 
 def test_a_binary_stl_cut_at_a_record_boundary_is_exit_2_naming_both_counts(tmp_path):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
 import trimesh
@@ -385,6 +387,30 @@ def test_a_text_mesh_behind_a_utf8_byte_order_mark_reads_as_without(filename, te
     marked = load_surface(b"\xef\xbb\xbf" + text, filename=filename)
     assert marked.faces.tolist() == plain.faces.tolist() and marked.vertices.tolist() == plain.vertices.tolist()
     assert marked.enclosed_volume() == pytest.approx(1 / 6)
+
+
+TET_STL = trimesh.load_mesh(io.BytesIO(TET_OBJ), file_type="obj").export(file_type="stl_ascii").encode()
+
+
+@pytest.mark.parametrize("mark", [b"", b"\xef\xbb\xbf"])
+@pytest.mark.parametrize("end", [b"\r\n", b"\r", b"\r\r\n"])
+@pytest.mark.parametrize("filename, text", [("t.obj", TET_OBJ), ("t.off", TET_OFF), ("t.ply", TET_PLY),
+                                            ("t.stl", TET_STL)])
+def test_a_text_mesh_reads_the_same_whatever_its_line_ends(filename, text, end, mark):
+    # Windows' "\r\n" (also behind a byte-order mark) was read; classic Mac "\r" was one line to
+    # trimesh ("not a valid PLY file", "no mesh found", an STL enclosing no volume), and "\r\r\n" (a
+    # file saved twice through a Windows text stream) put a blank line after each of a PLY's rows
+    plain = load_surface(text, filename=filename)
+    other = load_surface(mark + text.replace(b"\n", end), filename=filename)
+    assert other.faces.tolist() == plain.faces.tolist() and other.vertices.tolist() == plain.vertices.tolist()
+    assert other.warnings == plain.warnings and other.enclosed_volume() == pytest.approx(1 / 6)
+
+
+def test_carriage_returns_inside_a_binary_ply_are_data():
+    x = float(np.frombuffer(b"\r\x00\x80\x3f", "<f4")[0])  # 1.0000015, whose float32 holds a byte 0x0d
+    data = trimesh.creation.box(bounds=[[0, 0, 0], [x, 1, 1]]).export(file_type="ply", encoding="binary")
+    assert b"\r" in data[data.index(b"end_header\n"):]
+    assert load_surface(data, filename="box.ply").bounds[1].tolist() == [x, 1, 1]
 
 
 def test_the_enclosed_volume_of_a_part_far_from_the_origin_does_not_cancel_away():

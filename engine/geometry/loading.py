@@ -52,7 +52,7 @@ from engine.geometry.polygon import drawing_surface
 from engine.geometry.shells import unite_overlapping_shells
 from engine.geometry.surface import Surface
 from engine.geometry.stitch import stitch_cracks
-from engine.geometry.stl import fix_binary_count
+from engine.geometry.stl import TEXT, fix_binary_count
 from engine.geometry.topology import edge_balance, edges, manifold_adjacency, shells
 from engine.geometry.winding import winding_number
 
@@ -64,6 +64,12 @@ _COMMON_FORMATS = "stl, obj, ply, off, glb, gltf, 3mf; svg, dxf in 2D; also insi
 # text formats whose first line trimesh misreads behind a UTF-8 byte-order mark (Windows editors
 # write one): an OBJ starting "\ufeffv 0 0 0" lost its first vertex and was "not a valid OBJ file"
 _BOM_FORMATS = {"obj", "off", "ply"}
+# line ends of text meshes, given to trimesh as "\n": its readers find lines at "\n", so a file with
+# classic Mac line ends ("\r") was one long line (a PLY or OBJ "not valid" or "no mesh found", an ASCII
+# STL enclosing no volume), and one saved twice through a Windows text stream ("\r\r\n") had a blank
+# line after every row, which misaligns a PLY's elements; Windows' own "\r\n" was read as it is
+_TEXT_FORMATS = {"obj", "off", "ply", "stl"}
+_LINE_END = re.compile(rb"\r+\n?")
 # formats that are ZIP archives themselves: their members are inflated by trimesh's loader
 _ZIP_FORMATS = {"3mf", "3dxml"}
 # a hint for formats whose files commonly fail for a reason the user can fix
@@ -138,6 +144,8 @@ def _load_surface(source, filename, dimension, scale, transform, max_inflated_by
                 notes += fixes
             elif t in _BOM_FORMATS and d.startswith(codecs.BOM_UTF8):
                 d = d[len(codecs.BOM_UTF8):]
+            if t in _TEXT_FORMATS and b"\r" in d and not d.translate(None, TEXT):  # binary bytes stay as they are
+                d = _LINE_END.sub(b"\n", d)
             read.append((n, d, t))
         # trimesh computes normals of whatever it reads: non-finite input is refused by _checked_arrays
         with np.errstate(invalid="ignore", over="ignore"):

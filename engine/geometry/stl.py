@@ -30,7 +30,8 @@ from engine.errors import GeometryError
 _HEADER, _RECORD = 84, 50
 # float32 garbage spans 1e-45..3e38; coordinates of a real part are far inside this
 _MAX_COORDINATE = 1e30
-_TEXT = bytes(range(32, 256)) + b"\t\n\r\f\v"
+# the bytes of a text file (UTF-8 included): a file of only these is no binary STL, nor binary at all
+TEXT = bytes(range(32, 256)) + b"\t\n\r\f\v"
 
 
 def fix_binary_count(name: str, data: bytes) -> tuple[bytes, list[str]]:
@@ -39,7 +40,7 @@ def fix_binary_count(name: str, data: bytes) -> tuple[bytes, list[str]]:
     Unchanged (no notes) for ASCII files, binary files whose count fits their size, and bytes
     that are no binary STL. Raises ``GeometryError`` for a binary STL that was cut short.
     """
-    if len(data) < _HEADER + _RECORD or not data.translate(None, _TEXT):
+    if len(data) < _HEADER + _RECORD or not data.translate(None, TEXT):
         return data, []  # too short to hold a triangle, or text (ASCII STL or no STL): trimesh's own reading
     count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
     n, rest = divmod(len(data) - _HEADER, _RECORD)
