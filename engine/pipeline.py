@@ -108,7 +108,15 @@ def load_geometry(spec: JobSpec, mesh: MeshInput = None, *, filename: str | None
     g = spec.geometry
     transform = np.asarray(g.transform, dtype=float) if g.transform is not None else None
     if g.polygon is not None:
-        surface = polygon_surface([np.asarray(loop, dtype=float) for loop in g.polygon], scale=g.scale, transform=transform)
+        try:
+            surface = polygon_surface([np.asarray(loop, dtype=float) for loop in g.polygon], scale=g.scale,
+                                      transform=transform)
+        except GeometryError as exc:
+            # the CLI prints the message and the service files it under the field it starts with, as
+            # load_surface's 'geometry.mesh:'; those naming geometry.scale or .transform keep theirs
+            if not str(exc).startswith("geometry."):
+                exc.args = (f"geometry.polygon: {exc}",)
+            raise
         return surface, json.dumps(g.polygon).encode()
     data, name = read_mesh_input(spec, mesh, filename, base_dir)
     surface = load_surface(data, filename=name, dimension=spec.dimension, scale=g.scale, transform=transform)

@@ -119,8 +119,10 @@ def _engine_error(message: str, source: list | None = None) -> dict[str, Any]:
     source = source or ["body", "mesh"]
     path, reason = _split_path(message)
     if path[:2] == ["geometry", "mesh"] or not path:
-        loop = _LOOP.match(message) if source[-1] == "polygon" else None
-        return _error([*source, int(loop.group(1))] if loop else source, message)
+        return _error(source, message)
+    if path == ["geometry", "polygon"]:  # a fault of one loop is filed at that loop, geometry.polygon.<i>
+        loop = _LOOP.match(reason)
+        return _error(["body", "spec", *path, *([int(loop.group(1))] if loop else [])], reason)
     return _error(["body", "spec", *path], reason)
 
 

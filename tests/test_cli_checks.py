@@ -2,7 +2,7 @@
 subprocesses: the same limits in validate / voxelize / run (exit 2, one line), an unwritable
 output found before the solve, Ctrl-C as one line with exit 130 and no temporary files left, probes
 outside the solid named in a warning, no note about STL's merged corners; text meshes with any line
-ends, a binary STL cut short."""
+ends, a binary STL cut short and polygon errors at geometry.polygon."""
 
 from __future__ import annotations
 
@@ -207,7 +207,7 @@ def test_cells_far_larger_than_the_part_are_refused_not_rounded_away(tmp_path):
     assert not list(tmp_path.glob("*.h5"))
 
 
-# --- what the entry-point sweep left: line ends, a binary STL cut short ------------------------
+# --- what the entry-point sweep left: line ends, a binary STL cut short, polygon messages ---------
 
 
 def test_a_ply_with_mac_or_doubled_windows_line_ends_validates_as_with_unix_ones(tmp_path):
@@ -239,3 +239,33 @@ def test_a_binary_stl_cut_at_a_record_boundary_is_exit_2_naming_both_counts(tmp_
         assert one_error_line(cli("validate", path)) == (
             f"error: geometry.mesh: cannot read 'cantilever.stl': the binary STL is cut short: its header gives 12 "
             f"triangles (684 bytes), the file has {size} bytes ({records} whole triangles)")
+
+
+POLYGON_JOB = {"dimension": 2, "grid": {"resolution": 16, "padding": 1}, "method": {"kind": "staggered"},
+               "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000},
+               "boundaries": [{"kind": "displacement", "region": {"box": [[-0.1, -0.1], [0.05, 1.1]]}, "value": [0, 0]}],
+               "loads": {"gravity": [0, -9.81]}, "analysis": {"kind": "static"}}
+SQUARE = [[0, 0], [1, 0], [1, 1], [0, 1]]
+
+
+@pytest.mark.parametrize("loops, reason", [
+    ([[[0, 0], [1, 1], [1, 0], [0, 1]]], "polygon 'polygon': loop 0 is not a simple closed curve: it crosses itself "
+                                         "at (0.5, 0.5)"),  # was "(Self-intersection[0.5 0.5])", no field
+    ([[[0, 0], [2, 0], [2, 2], [1, 2], [1, 1], [1, 2], [0, 2]]], "polygon 'polygon': loop 0 is not a simple closed "
+                                                                 "curve: it touches itself at (1, 2)"),
+    ([SQUARE, [[0.5, 0.5], [2, 0.5], [2, 2], [0.5, 2]]], "polygon 'polygon': loops 0 and 1 cross each other"),
+    ([SQUARE, [[0.5, 0.5]] * 5], "polygon 'polygon': loop 1 encloses no area (1 distinct points)"),
+    ([[[0, 0], [1e200, 0], [1e200, 1e200]]], "'polygon' reaches coordinates of 1e+200 m; at most 1e+60 m is supported"),
+])
+def test_polygon_errors_name_geometry_polygon_and_say_why_in_words(tmp_path, loops, reason):
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps({**POLYGON_JOB, "geometry": {"polygon": loops}}))
+    assert one_error_line(cli("validate", path)) == f"error: geometry.polygon: {reason}"
+
+
+def test_a_polygon_error_is_the_same_line_in_run(tmp_path):
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps({**POLYGON_JOB, "geometry": {"polygon": [[[0, 0], [1, 1], [1, 0], [0, 1]]]}}))
+    assert one_error_line(cli("run", path, "-o", tmp_path / "r.h5")) == (
+        "error: geometry.polygon: polygon 'polygon': loop 0 is not a simple closed curve: it crosses itself at (0.5, 0.5)")
+    assert not list(tmp_path.glob("*.h5"))

@@ -52,8 +52,16 @@ def test_polygon_placement_and_errors():
         polygon_surface([[[0, 0], [1, 1], [2, 2]]])
     with pytest.raises(GeometryError, match=r"loop 1 encloses no area \(1 distinct points\)"):
         polygon_surface([square, [[0.5, 0.5]] * 5])
-    with pytest.raises(GeometryError, match=r"loop 0 is not a simple closed curve \(Self-intersection"):
+    # shapely's reason in words ('Self-intersection[0.5 0.5]' before), at the point where the loop was
+    # drawn: placed 10x larger and turned, the crossing below is still named at (0.666667, 0.666667)
+    bowtie = r"loop 0 is not a simple closed curve: it crosses itself at \(0\.5, 0\.5\)$"
+    with pytest.raises(GeometryError, match=bowtie):
         polygon_surface([[[0, 0], [1, 1], [1, 0], [0, 1]]])  # a bowtie: its lobes' areas cancel
+    crossing = r"^polygon 'polygon': loop 0 is not a simple closed curve: it crosses itself at \(0\.666667, 0\.666667\)"
+    with pytest.raises(GeometryError, match=crossing):
+        polygon_surface([[[0, 0], [2, 2], [2, 0], [0, 1]]], scale=10.0, transform=turn)
+    with pytest.raises(GeometryError, match=r"loop 0 is not a simple closed curve: it touches itself at \(1, 2\)"):
+        polygon_surface([[[0, 0], [2, 0], [2, 2], [1, 2], [1, 1], [1, 2], [0, 2]]])  # a slit down to (1, 1)
     with pytest.raises(GeometryError, match="loop 1 has 1 points with non-finite"):
         polygon_surface([square, [[0.2, 0.2], [0.4, np.nan], [0.3, 0.4]]])
 

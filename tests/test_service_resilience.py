@@ -319,6 +319,17 @@ def test_a_binary_stl_cut_short_is_422_at_the_mesh_naming_both_counts(api):
         "(684 bytes), the file has 434 bytes (7 whole triangles)")}]
 
 
+def test_a_polygon_error_is_422_at_its_loop_in_words(api):
+    spec = {"dimension": 2, "grid": {"resolution": 16, "padding": 1}, "method": {"kind": "staggered"},
+            "material": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000},
+            "boundaries": [{"kind": "displacement", "region": {"box": [[-0.1, -0.1], [0.05, 1.1]]}, "value": [0, 0]}],
+            "geometry": {"polygon": [[[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 0], [2, 2], [2, 0], [0, 1]]]}}
+    r = api.post("/jobs", data={"spec": json.dumps(spec)})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == [{"loc": ["body", "spec", "geometry", "polygon", 1], "type": "value_error", "msg": (
+        "polygon 'polygon': loop 1 is not a simple closed curve: it crosses itself at (0.666667, 0.666667)")}]
+
+
 def test_a_field_sent_twice_is_422_naming_it(api):
     spec = json.dumps(cantilever(16))
     r = api.post("/jobs", data={"spec": spec}, files=[("mesh", ("a.stl", MESH)), ("mesh", ("b.stl", b"garbage"))])

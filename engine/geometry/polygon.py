@@ -50,11 +50,11 @@ def polygon_surface(
     clean = [_clean_loop(loop, i, name, warnings) for i, loop in enumerate(loops)]
     points, _ = place(np.concatenate(clean), scale, transform, name)  # orientation fixed below
     offsets = np.cumsum([0] + [len(c) for c in clean])
-    clean = [points[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    placed = [points[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
     faces = []
     # Nesting decides every loop's role, so reversing one is bookkeeping, not news for the user:
     # a hole drawn in the outline's direction is how SVG's evenodd rule and most CAD exports draw it.
-    for loop, start, depth in zip(clean, offsets, _loop_depths(clean, name)):
+    for loop, start, depth in zip(placed, offsets, _loop_depths(placed, name, clean)):
         idx = start + np.arange(len(loop))
         segments = np.stack([idx, np.roll(idx, -1)], axis=1)
         if (_signed_area(loop) > 0) != (depth % 2 == 0):
@@ -191,8 +191,7 @@ def _clean_loop(loop, i: int, name: str, warnings: list[str]) -> np.ndarray:
         p = p[~repeat]
     flat = distinct < 3 or np.linalg.matrix_rank(p - p.mean(axis=0)) < 2
     if not flat and _signed_area(p) == 0.0 and not shapely.Polygon(p).is_valid:  # a bowtie's lobes cancel
-        raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve "
-                            f"({shapely.is_valid_reason(shapely.Polygon(p))})")
+        raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve: {_why_not_simple(p)}")
     if flat or _signed_area(p) == 0.0:
         raise GeometryError(f"polygon '{name}': loop {i} encloses no area ({distinct} distinct points)")
     return p
@@ -204,13 +203,29 @@ def _signed_area(loop: np.ndarray) -> float:
         return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
-def _loop_depths(loops: list[np.ndarray], name: str) -> np.ndarray:
-    """How many other loops enclose each loop; loops must not cross themselves or each other."""
+# shapely's reasons a single ring is no simple closed curve ('Self-intersection[0.5 0.5]'), in words
+_NOT_SIMPLE = {"Self-intersection": "it crosses itself", "Ring Self-intersection": "it touches itself"}
+
+
+def _why_not_simple(loop: np.ndarray) -> str:
+    """Why a loop [p, 2] is no simple closed curve, and where, in the loop's own coordinates."""
+    reason = shapely.is_valid_reason(shapely.Polygon(loop))
+    kind, _, point = reason.partition("[")
+    words = _NOT_SIMPLE.get(kind, "it crosses or touches itself")
+    try:
+        x, y = (float(v) for v in point.rstrip("]").split()[:2])
+    except ValueError:  # the loop as given is valid (its placement's round-off made the fault): no point to name
+        return words
+    return f"{words} at ({x:.6g}, {y:.6g})"
+
+
+def _loop_depths(loops: list[np.ndarray], name: str, given: list[np.ndarray]) -> np.ndarray:
+    """How many other loops enclose each loop; loops must not cross themselves or each other.
+    ``given``: the loops before placement, whose coordinates a message names."""
     polygons = [shapely.Polygon(p) for p in loops]
     for i, polygon in enumerate(polygons):
         if not polygon.is_valid:
-            reason = shapely.is_valid_reason(polygon)
-            raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve ({reason})")
+            raise GeometryError(f"polygon '{name}': loop {i} is not a simple closed curve: {_why_not_simple(given[i])}")
     depth = np.zeros(len(loops), dtype=np.int64)
     for i, j in shapely.STRtree(polygons).query(polygons).T:  # pairs with overlapping boxes
         if i >= j:
