@@ -308,6 +308,22 @@ def test_a_part_header_over_the_parser_limit_is_400_naming_the_limit(api):
     assert "over 4224 bytes" in err["msg"] and "file name" in err["msg"]
 
 
+@pytest.mark.parametrize("fields, files, kind, words", [
+    (1001, 0, "too_many_fields", "more than 1000 text fields"),
+    (0, 1001, "too_many_files", "more than 1000 file parts"),
+])
+def test_a_form_over_the_parsers_part_counts_is_400_in_our_shape(api, fields, files, kind, words):
+    # Starlette's answer was {"detail": "Too many fields. Maximum number of fields is 1000."}: a bare
+    # string where every other error of the API is a list of {loc, msg, type}
+    data = {"spec": json.dumps(cantilever(16)), **{f"f{i}": "x" for i in range(fields)}}
+    parts = [("mesh", ("a.stl", MESH))] + [(f"m{i}", (f"{i}.stl", b"x")) for i in range(files)]
+    r = api.post("/jobs", data=data, files=parts)
+    assert r.status_code == 400, r.text
+    assert r.json()["detail"] == [{"loc": ["body"], "type": kind, "msg": (
+        f"the form has {words}, the limit of this server's form parser; a job needs one 'spec' field (or file "
+        "part) and at most one 'mesh' file part")}]
+
+
 def test_a_binary_stl_cut_short_is_422_at_the_mesh_naming_both_counts(api):
     import trimesh
 

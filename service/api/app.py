@@ -162,6 +162,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             return JSONResponse({"detail": [_part_too_large(exc, int(too_large.group(1)) * 1024)]}, status_code=413)
         if exc.status_code == 400 and exc.detail == _INVALID_MULTIPART:
             return JSONResponse({"detail": [_multipart_error(exc)]}, status_code=400)
+        too_many = _TOO_MANY_PARTS.fullmatch(str(exc.detail)) if exc.status_code == 400 else None
+        if too_many:
+            return JSONResponse({"detail": [_too_many_parts(*too_many.groups())]}, status_code=400)
         if exc.status_code == 405:
             # Starlette's Allow names the methods of the first route that matched the path only
             # (GET of /jobs/{id}); a client must learn every method the path has (DELETE too)
@@ -235,6 +238,19 @@ def _multipart_error(exc: Exception) -> dict:
     return {"loc": ["body"], "type": "multipart_invalid",
             "msg": "the request body is not valid multipart/form-data (a boundary, a part header or the end of "
                    "the form is malformed)"}
+
+
+# Starlette's words for a form over its count of text fields or of file parts (1000 each)
+_TOO_MANY_PARTS = re.compile(r"Too many (fields|files)\. Maximum number of (?:fields|files) is (\d+)\.")
+
+
+def _too_many_parts(kind: str, limit: str) -> dict:
+    """The 400 entry for a form with more parts than the parser takes, in our shape: Starlette's
+    own answer is a bare string, which names neither the part of the request nor what a job needs."""
+    what = "text fields" if kind == "fields" else "file parts"
+    msg = (f"the form has more than {limit} {what}, the limit of this server's form parser; a job "
+           "needs one 'spec' field (or file part) and at most one 'mesh' file part")
+    return {"loc": ["body"], "msg": msg, "type": f"too_many_{kind}"}
 
 
 def _parsed_part_name(exc: BaseException | None) -> str | None:
