@@ -150,16 +150,18 @@ def test_curl_smoother_is_jacobi_on_faces_and_curls(d, rng):
 DELTA = 0.01  # [m] the top face's displacement towards the bottom one
 
 
-def block_run(nu: float, h: float):
+def block_run(nu: float, h: float, shift: float = 0.0):
     """The block [0, 1] x [0, 1] x [0, 0.5] m (E = 1 Pa) bonded to two clamps: the bottom face held at
-    0, the top face at (0, 0, -DELTA); its sides free. Faces on grid planes. Returns (CG
-    iterations, u at the probes [75, 3], volume change [m^3] = sum over cells of Vc h^3 tr(eps))."""
+    0, the top face at (0, 0, -DELTA); its sides free. Faces on grid planes, or moved by ``shift`` [m]
+    along every axis (the probes with it). Returns (CG iterations, u at the probes [75, 3], volume
+    change [m^3] = sum over cells of Vc h^3 tr(eps))."""
     import trimesh
 
     g = np.linspace(0.1, 0.9, 5)
-    probes = np.array([[x, y, z] for x in g for y in g for z in (0.1, 0.25, 0.4)])
-    below = {"halfspace": {"point": [0, 0, 0], "normal": [0, 0, 1]}}
-    above = {"halfspace": {"point": [0, 0, 0.5], "normal": [0, 0, -1]}}
+    probes = np.array([[x, y, z] for x in g for y in g for z in (0.1, 0.25, 0.4)]) + shift
+    slack = 1e-6 if shift else 0.0  # a moved face's coordinates carry round-off
+    below = {"halfspace": {"point": [0, 0, shift + slack], "normal": [0, 0, 1]}}
+    above = {"halfspace": {"point": [0, 0, 0.5 + shift - slack], "normal": [0, 0, -1]}}
     spec = {"grid": {"cell_size": h, "padding": 1}, "geometry": {"mesh": "block.stl"},
             "method": {"kind": "staggered", "solver": "iterative"},  # the V-cycle's iterations are asserted
             "material": {"youngs_modulus": 1.0, "poisson_ratio": nu},
@@ -168,7 +170,7 @@ def block_run(nu: float, h: float):
             "solver": {"rtol": 1e-10},
             "output": {"fields": ["displacement", "strain"], "probes": probes.tolist(), "surface": False}}
     with tempfile.TemporaryDirectory() as tmp:
-        trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 0.5]]).export(Path(tmp) / "block.stl")
+        trimesh.creation.box(bounds=np.array([[0, 0, 0], [1, 1, 0.5]]) + shift).export(Path(tmp) / "block.stl")
         r = simulate(spec, Path(tmp) / "block.stl", cache=GeometryCache(None))
     trace = np.nan_to_num(r.fields.cells["strain"][..., :3].sum(axis=-1))
     return r.solver.iterations, r.fields.probes["displacement"], float(np.sum(r.volume_fraction * trace) * h**3)

@@ -21,11 +21,13 @@ sources outside the groups (whose energy no longer bounds their flux).
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from ..boundary import area_vectors
 from ..geometry.apertures import cell_area_vectors, face_apertures
 from ..geometry.surface import Surface
 from .nitsche import TAU, HoldPatches, HoldQuadrature, SurfaceOperator, _cell_fraction, cell_fill, combined, make_surface_operator
@@ -60,24 +62,22 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
     origin = np.asarray(level.origin, dtype=float)
     cells, cell_of = _unique_rows(_point_cells(quad, origin, h))
     on_plane = (np.abs(quad.normals).max(axis=1) > 1 - 1e-12) & _on_planes(quad.points, quad.normals, origin, h)
-    cut = (_cell_fraction(level, cells)[cell_of] > 0) & ~on_plane
+    off_plane = (_cell_fraction(level, cells)[cell_of] > 0) & ~on_plane
     groups = _groups(level, _near(cells), patches, surface)
     if groups is None:
         operator = make_surface_operator(level, quad, lam)
-        operator.kept = cut
+        operator.kept = off_plane
         return operator
-    members, group, qualified, member_free = groups
-    in_group = np.isin(lay.positions(cells), lay.positions(qualified))[cell_of]
-    member_pos = lay.positions(members)
-    kept = cut & ~in_group
+    in_group = np.isin(lay.positions(cells), lay.positions(groups.qualified))[cell_of]
+    member_pos = lay.positions(groups.members)
+    kept = off_plane & ~in_group
     in_group |= ~_has_source(level, cells, member_pos)[cell_of]  # a full hold's points need a source
     parts = [make_surface_operator(level, quad.subset(in_group), 0.0)] if in_group.any() else []
     if not in_group.all():
         parts.append(make_surface_operator(level, quad.subset(~in_group), lam, exclude=member_pos))
     extra = None
-    if len(members):
-        flux_g = _prescribed_flux(level, quad, in_group, members, group, patches)
-        extra = _finite_volume(level, surface, members, group, flux_g, member_free)
+    if len(groups.members):
+        extra = _finite_volume(level, surface, groups, _prescribed_flux(level, quad, in_group, groups))
     operator = combined(parts, level.size, extra)
     operator.kept = kept
     return operator
@@ -118,20 +118,45 @@ def _on_planes(points: np.ndarray, normals: np.ndarray, origin: np.ndarray, h: f
     return np.abs(x - np.round(x)) <= 1e-6
 
 
+def _block(cells: np.ndarray) -> np.ndarray:
+    """[C, 3^d, d] the 3^d block of cells around each of ``cells`` [C, d] (offsets in -1, 0, 1)."""
+    d = cells.shape[1]
+    return cells[:, None, :] + np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)[None]
+
+
 def _near(cells: np.ndarray) -> np.ndarray:
     """The distinct cells [k, d] of the 3^d blocks of ``cells``: every cell a patch whose points lie in
     ``cells`` can cut (points are less than a cell apart)."""
-    d = cells.shape[1]
-    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
-    return _unique_rows((cells[:, None, :] + offsets[None]).reshape(-1, d))[0]
+    return _unique_rows(_block(cells).reshape(-1, cells.shape[1]))[0]
 
 
-def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surface
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """(members [M, d]: the cells whose volumetric term is replaced, their group [M], the qualifying
-    cells [k, d]: cells among ``cells`` holding surface held with its normal prescribed, whose points
-    Nitsche holds with its mu part alone (the members and the weak rim cells), and the members' free
-    surface's area vectors [M, d] [m^(d-1)]), or None when no cell qualifies."""
+def _apertures(surface: Surface, origin: np.ndarray, h: float, cells: np.ndarray) -> np.ndarray:
+    """[C, d, 2] the solid shares of each cell's lower and upper face along every axis (one scan per
+    axis for both)."""
+    n, d = cells.shape
+    out = np.empty((n, d, 2))
+    for a in range(d):
+        out[:, a] = face_apertures(surface, origin, h, a, np.concatenate([cells, cells + np.eye(d, dtype=np.int64)[a]])
+                                   ).reshape(2, n).T
+    return out
+
+
+@dataclass(frozen=True)
+class Groups:
+    """members [M, d]: the cells whose volumetric term is replaced; group [M]: each one's group;
+    qualified [k, d]: the cells holding surface held with its normal prescribed whose points Nitsche
+    holds with its mu part alone (the members and the weak rim cells); free, held [M, d] [m^(d-1)]: the
+    area vectors of each member's free and held (normal prescribed) surface."""
+
+    members: np.ndarray
+    group: np.ndarray
+    qualified: np.ndarray
+    free: np.ndarray
+    held: np.ndarray
+
+
+def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surface) -> Groups | None:
+    """The groups of the cells among ``cells`` (None when no cell qualifies)."""
     d, h = level.dim, level.spacing
     origin = np.asarray(level.origin, dtype=float)
     vc = _cell_fraction(level, cells)
@@ -140,10 +165,11 @@ def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surf
         return None
     # the cell's surface (its area vector from the apertures) and the part of it held, normal prescribed
     idx = np.nonzero(ok)[0]
-    eye = np.eye(d, dtype=np.int64)
-    whole = -np.stack([face_apertures(surface, origin, h, a, cells[idx] + eye[a])
-                       - face_apertures(surface, origin, h, a, cells[idx]) for a in range(d)], axis=1) * h ** (d - 1)
+    alpha = _apertures(surface, origin, h, cells[idx])
+    whole = -(alpha[:, :, 1] - alpha[:, :, 0]) * h ** (d - 1)
     held = cell_area_vectors(_normal_held_pieces(patches), origin, h, cells[idx])
+    cell_held = np.zeros((len(cells), d))
+    cell_held[idx] = held
     # a cell holding free surface too (a patch's rim) takes that part's flux from its mean face velocities;
     # one mostly free keeps its volumetric term, and its points Nitsche's mu part alone ("weak")
     free = np.zeros((len(cells), d))
@@ -152,63 +178,64 @@ def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surf
     weak = np.zeros(len(cells), dtype=bool)
     weak[idx] = ok[idx] & (np.linalg.norm(held, axis=1) < RIM_SHARE * np.linalg.norm(whole, axis=1))
     ok &= ~weak
-    # groups: a qualifying cell filled to TAU is its own; a sliver joins the nearest qualifying or full
-    # cell of its 3^d block filled to TAU (fuller first), or keeps the full Nitsche terms without one
+    # groups: a qualifying cell filled to TAU is its own; a sliver joins the nearest qualifying cell filled
+    # to TAU or full cell without surface of its 3^d block (fuller first), or keeps the full Nitsche terms
     source = cells.copy()
-    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
-    distance = np.abs(offsets).sum(axis=1)
     slivers = np.nonzero(ok & (vc < TAU))[0]
     if len(slivers):
-        cand = cells[slivers][:, None, :] + offsets[None]
+        cand = _block(cells[slivers])
+        distance = np.abs(cand - cells[slivers][:, None, :]).sum(axis=2)
         fill = _cell_fraction(level, cand.reshape(-1, d)).reshape(len(slivers), -1)
         pos = level.layout.positions(cand.reshape(-1, d))
-        big = level.layout.positions(cells[ok & (vc >= TAU)])
-        usable = (fill >= TAU) & ((fill >= 1.0) | np.isin(pos, big).reshape(fill.shape))
-        score = np.where(usable, 10.0 - distance[None, :] + 0.1 * fill, -np.inf)
+        # a source brings its own surface into the group: a qualifying cell, or a full one with none
+        plain = np.zeros(len(cells), dtype=bool)
+        plain[idx] = (vc[idx] >= 1.0) & (np.abs(whole).max(axis=1) <= AREA_TOLERANCE * h ** (d - 1))
+        big = level.layout.positions(cells[(ok & (vc >= TAU)) | plain])
+        usable = (fill >= TAU) & np.isin(pos, big).reshape(fill.shape)
+        score = np.where(usable, 10.0 - distance + 0.1 * fill, -np.inf)
         best = score.argmax(axis=1)
         found = np.isfinite(score[np.arange(len(slivers)), best])
         source[slivers] = cand[np.arange(len(slivers)), best]
         ok[slivers[~found]] = False
     if not ok.any():
-        return None if not weak.any() else (np.zeros((0, d), np.int64), np.zeros(0, np.int64), cells[weak], np.zeros((0, d)))
+        return None if not weak.any() else Groups(np.zeros((0, d), np.int64), np.zeros(0, np.int64), cells[weak],
+                                                  np.zeros((0, d)), np.zeros((0, d)))
     members, where = _unique_rows(np.concatenate([cells[ok], source[ok]]))
     _, group = _unique_rows(source[ok])
     member_group = np.empty(len(members), dtype=np.int64)
     member_group[where] = np.concatenate([group, group])
-    member_free = np.zeros((len(members), d))
+    # a source that does not qualify holds no surface
+    member_free, member_held = np.zeros((len(members), d)), np.zeros((len(members), d))
     member_free[where[: int(ok.sum())]] = free[ok]
-    return members, member_group, cells[ok | weak], member_free
+    member_held[where[: int(ok.sum())]] = cell_held[ok]
+    return Groups(members, member_group, cells[ok | weak], member_free, member_held)
 
 
 def _normal_held_pieces(patches: HoldPatches) -> np.ndarray:
     """The held pieces [M, d, d] whose boundary prescribes their normal component."""
     out = []
     for bc, pieces in zip(patches.prescribed, patches.pieces):
-        d = pieces.shape[-1]
-        e = pieces[:, 1:] - pieces[:, :1]
-        n = np.cross(e[:, 0], e[:, 1]) if d == 3 else np.stack([e[:, 0, 1], -e[:, 0, 0]], axis=1)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        out.append(pieces[np.linalg.norm(n * (1.0 - bc.mask(d)), axis=1) <= NORMAL_TOLERANCE])
+        an = area_vectors(pieces)
+        n = an / np.maximum(np.linalg.norm(an, axis=1, keepdims=True), 1e-300)
+        out.append(pieces[np.linalg.norm(n * (1.0 - bc.mask(pieces.shape[-1])), axis=1) <= NORMAL_TOLERANCE])
     return np.concatenate(out)
 
 
 def _has_source(level: Level, cells: np.ndarray, exclude: np.ndarray) -> np.ndarray:
     """[C] whether a cell of each one's 3^d block holds material and is not excluded (Nitsche's
     full terms need such a source cell)."""
-    d = level.dim
-    offsets = np.array(list(itertools.product((-1, 0, 1), repeat=d)), dtype=np.int64)
-    cand = (cells[:, None, :] + offsets[None]).reshape(-1, d)
+    cand = _block(cells).reshape(-1, level.dim)
     usable = (cell_fill(level, cand) > 0) & ~np.isin(level.layout.positions(cand), exclude)
     return usable.reshape(len(cells), -1).any(axis=1)
 
 
-def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, members: np.ndarray, group: np.ndarray,
-                     patches: HoldPatches) -> np.ndarray:
+def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, groups: Groups) -> np.ndarray:
     """G_S [groups] [m^d]: int g . n over each group's held surface. The points' rule is corrected by
     the cells' exact held area vectors so that a constant g gives the exact flux (its points are not
     clipped to the cells, and a constant field must leave every group without divergence)."""
     d, h, lay = level.dim, level.spacing, level.layout
     origin = np.asarray(level.origin, dtype=float)
+    members, group = groups.members, groups.group
     n_groups = int(group.max()) + 1
     order = np.argsort(lay.positions(members))
     sorted_pos = lay.positions(members)[order]
@@ -232,30 +259,29 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, m
         nearest = cKDTree(quad.points).query(centre)[1]
         mean_g[empty] = (quad.mask * quad.values)[nearest]
     exact = np.zeros((n_groups, d))
-    np.add.at(exact, group, cell_area_vectors(_normal_held_pieces(patches), origin, h, members))
+    np.add.at(exact, group, groups.held)
     return flux + np.einsum("gi,gi->g", mean_g, exact - area)
 
 
-def _finite_volume(level: Level, surface: Surface, members: np.ndarray, group: np.ndarray,
-                   flux_g: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+def _finite_volume(level: Level, surface: Surface, groups: Groups, flux_g: np.ndarray
+                   ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """(sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]): the
     groups' finite-volume divergence D_S in place of their members' lambda / 2 V_c tr(eps_c)^2 (T:
     the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
     d, h, lay, size = level.dim, level.spacing, level.layout, level.size
-    origin = np.asarray(level.origin, dtype=float)
+    members, group = groups.members, groups.group
     eye = np.eye(d, dtype=np.int64)
     volume = _cell_fraction(level, members) * h**d
+    alpha = _apertures(surface, np.asarray(level.origin, dtype=float), h, members)
     n_groups = len(flux_g)
     rows, keys, div, trace = [], [], [], []
     for a in range(d):
         for side, sign in ((0, -1.0), (1, 1.0)):
-            face = members + side * eye[a]
-            pos = lay.positions(face)
+            pos = lay.positions(members + side * eye[a])
             live = (pos >= 0) & level.active[a, np.maximum(pos, 0)]
-            alpha = face_apertures(surface, origin, h, a, face[live])
             rows.append(np.nonzero(live)[0])
             keys.append(a * size + pos[live])
-            div.append(sign * alpha * h ** (d - 1) + 0.5 * free[live, a])
+            div.append(sign * alpha[live, a, side] * h ** (d - 1) + 0.5 * groups.free[live, a])
             trace.append(np.full(live.sum(), sign / h))
     rows, keys, div, trace = (np.concatenate(v) for v in (rows, keys, div, trace))
     every, col = np.unique(keys, return_inverse=True)
