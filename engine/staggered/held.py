@@ -77,7 +77,7 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
         parts.append(make_surface_operator(level, quad.subset(~in_group), lam, exclude=member_pos))
     extra = None
     if len(groups.members):
-        extra = _finite_volume(level, surface, groups, _prescribed_flux(level, quad, in_group, groups))
+        extra = _finite_volume(level, groups, _prescribed_flux(level, quad, in_group, groups))
     operator = combined(parts, level.size, extra)
     operator.kept = kept
     return operator
@@ -146,13 +146,14 @@ class Groups:
     """members [M, d]: the cells whose volumetric term is replaced; group [M]: each one's group;
     qualified [k, d]: the cells holding surface held with its normal prescribed whose points Nitsche
     holds with its mu part alone (the members and the weak rim cells); free, held [M, d] [m^(d-1)]: the
-    area vectors of each member's free and held (normal prescribed) surface."""
+    area vectors of each member's free and held (normal prescribed) surface; alpha: its apertures."""
 
     members: np.ndarray
     group: np.ndarray
     qualified: np.ndarray
     free: np.ndarray
     held: np.ndarray
+    alpha: np.ndarray  # [M, d, 2] each member's lower and upper face's solid share per axis
 
 
 def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surface) -> Groups | None:
@@ -199,7 +200,7 @@ def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surf
         ok[slivers[~found]] = False
     if not ok.any():
         return None if not weak.any() else Groups(np.zeros((0, d), np.int64), np.zeros(0, np.int64), cells[weak],
-                                                  np.zeros((0, d)), np.zeros((0, d)))
+                                                  np.zeros((0, d)), np.zeros((0, d)), np.zeros((0, d, 2)))
     members, where = _unique_rows(np.concatenate([cells[ok], source[ok]]))
     _, group = _unique_rows(source[ok])
     member_group = np.empty(len(members), dtype=np.int64)
@@ -208,7 +209,12 @@ def _groups(level: Level, cells: np.ndarray, patches: HoldPatches, surface: Surf
     member_free, member_held = np.zeros((len(members), d)), np.zeros((len(members), d))
     member_free[where[: int(ok.sum())]] = free[ok]
     member_held[where[: int(ok.sum())]] = cell_held[ok]
-    return Groups(members, member_group, cells[ok | weak], member_free, member_held)
+    # every member is one of ``cells`` (sources come from them): its apertures are at hand
+    cell_alpha = np.zeros((len(cells), d, 2))
+    cell_alpha[idx] = alpha
+    order = np.argsort(level.layout.positions(cells))
+    at = order[np.searchsorted(level.layout.positions(cells)[order], level.layout.positions(members))]
+    return Groups(members, member_group, cells[ok | weak], member_free, member_held, cell_alpha[at])
 
 
 def _normal_held_pieces(patches: HoldPatches) -> np.ndarray:
@@ -263,8 +269,7 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, g
     return flux + np.einsum("gi,gi->g", mean_g, exact - area)
 
 
-def _finite_volume(level: Level, surface: Surface, groups: Groups, flux_g: np.ndarray
-                   ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+def _finite_volume(level: Level, groups: Groups, flux_g: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """(sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]): the
     groups' finite-volume divergence D_S in place of their members' lambda / 2 V_c tr(eps_c)^2 (T:
     the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
@@ -272,7 +277,7 @@ def _finite_volume(level: Level, surface: Surface, groups: Groups, flux_g: np.nd
     members, group = groups.members, groups.group
     eye = np.eye(d, dtype=np.int64)
     volume = _cell_fraction(level, members) * h**d
-    alpha = _apertures(surface, np.asarray(level.origin, dtype=float), h, members)
+    alpha = groups.alpha
     n_groups = len(flux_g)
     rows, keys, div, trace = [], [], [], []
     for a in range(d):
