@@ -31,6 +31,7 @@ from engine.staggered import assembly, smoother_kernels
 from engine.staggered.curls import CurlSmoother
 from engine.staggered.elasticity import StaggeredElasticity
 from engine.staggered.multigrid import _on_free
+from engine.staggered.patches import vertex_patches
 from tests.conftest import polygon_surface_2d, surface_of
 from verification.problems import lame_at, relative_l2, simulate_problem
 
@@ -104,6 +105,29 @@ def curls(level, comp: np.ndarray, pos: np.ndarray) -> sp.csr_matrix:
                          shape=(len(comp), len(axis_pairs(d)) * len(index)))
 
 
+def band_solves(level, A: sp.csr_matrix, number: np.ndarray) -> sp.csr_matrix:
+    """sum_p R_p^T A_p^-1 R_p over the band's vertex patches, from A assembled (``number`` [d, size]:
+    each free DOF's row in A); checks that each patch is the faces around one vertex and that the
+    band covers every DOF the surface terms touch."""
+    patches = vertex_patches(level)
+    d, size, lay = level.dim, level.size, level.layout
+    assert patches.shape[1] == d * 2 ** (d - 1)
+    n = A.shape[0]
+    Z = sp.lil_matrix((n, n))
+    for keys in patches:
+        keys = keys[keys >= 0]
+        comp, index = keys // size, lay.indices()[keys % size]
+        # a-face I touches vertex V when I_a = V_a and I_k in {V_k - 1, V_k} otherwise
+        vertex = np.array([index[comp == a, a][0] if (comp == a).any() else index[:, a].max() for a in range(d)])
+        assert np.all((index == vertex) | ((index == vertex - 1) & (np.arange(d)[None] != comp[:, None])))
+        rows = number[comp, keys % size]
+        Z[np.ix_(rows, rows)] += np.linalg.inv(A[rows][:, rows].toarray())
+    sf = level.surface
+    covered = np.isin(sf.comp.astype(np.int64) * size + sf.pos, patches) | ~level.free[sf.comp, sf.pos]
+    assert covered.all()
+    return Z.tocsr()
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_curl_smoother_is_jacobi_on_faces_and_curls(d, rng):
     method = held_body(d)
@@ -131,9 +155,11 @@ def test_curl_smoother_is_jacobi_on_faces_and_curls(d, rng):
     div = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(cells), len(comp)))
     assert full.sum() > 100
     assert abs(div @ C[:, full]).max() == 0
-    # the kernel's operator against D^-1 + C Theta^-1 C^T assembled
+    # the kernel's operator against D^-1 + C Theta^-1 C^T + sum_p R_p^T A_p^-1 R_p assembled (p: the
+    # vertex patches of the band around the surface terms)
     theta = np.asarray((C.T @ A @ C).diagonal()).ravel()
     M = sp.diags(1.0 / A.diagonal()) + C @ sp.diags(np.where(theta > 0, 1.0 / np.where(theta > 0, theta, 1), 0)) @ C.T
+    M = M + band_solves(level, A, number)
     r = rng.standard_normal(len(comp))
     want = M @ r
     x = np.zeros((d, level.size))

@@ -9,7 +9,9 @@ divergence-free in every cell, four faces each, and span the divergence-free fie
     M^-1 = D^-1 + C Theta^-1 C^T,   Theta = diag(C^T A C)
 
 smooths them at the mu scale while D^-1 handles the rest. M is symmetric: Chebyshev iteration on
-M^-1 A keeps the V-cycle a CG preconditioner. An exact solve on the 12 faces around each vertex
+M^-1 A keeps the V-cycle a CG preconditioner. Beside held surfaces the curls are stiff (the held
+cells weigh another divergence); exact solves on the band's vertex patches (``patches.py``) add
+to M^-1 there. An exact solve on the 12 faces around each vertex
 (additive Schwarz; the classical robust smoother, Schoeberl 1999) reached the same iteration
 counts at 3.3 operator applies per step and 84 MB of patch inverses on the 64^3 shell; this costs
 about one apply and two edge arrays (docs/design-notes.md).
@@ -22,7 +24,8 @@ import itertools
 import numpy as np
 
 from ..runtime import device_array, device_zeros
-from . import smoother_kernels
+from . import kernels, smoother_kernels
+from .patches import band_inverse
 from .operator import Level
 from .smoother_kernels import PAIRS, curl_taps
 
@@ -47,6 +50,14 @@ class CurlSmoother:
         inv[:, self.n :] = 0.0
         self.inv_theta = device_array(inv, level.dtype)
         self.t = device_zeros((pairs, level.size), level.dtype)
+        self.band = None
+        band = band_inverse(level)
+        if band is not None:
+            comp, pos, z = band
+            self.band = (device_array(comp.astype(np.int32)), device_array(pos.astype(np.int32)),
+                         device_array(z.indptr.astype(np.int32)), device_array(z.indices.astype(np.int32)),
+                         device_array(z.data, np.float64))
+            self.band_in, self.band_out = device_zeros((len(comp),), np.float64), device_zeros((len(comp),), np.float64)
 
     def _surface_part(self) -> np.ndarray:
         """[pairs, size] c^T S c of the curls that touch the surface terms' DOFs (free ones only)."""
@@ -85,11 +96,21 @@ class CurlSmoother:
         """z = mask (D^-1 r + C Theta^-1 C^T r), then ``mode`` (START, STEP, APPLY of
         ``smoother_kernels``) with x, step and the Chebyshev coefficients c1, c2."""
         lv = self.level
+        if self.band is not None:  # Z r before the step writes x
+            comp, pos, indptr, indices, data = self.band
+            kernels.gather(r, comp, pos, self.band_in)
+            kernels.csr_apply(indptr, indices, data, self.band_in, self.band_out, 0)
         smoother_kernels.curl_residual(lv.dim, self.n, lv.nbr, r, self.inv_theta, self.t)
         smoother_kernels.hybrid_step(lv.dim, mode, self.n, lv.nbr, lv.dinv, lv.mask, r, self.t, x, step,
                                      float(c1), float(c2))  # numpy scalars defeat the launcher's argument cache
+        if self.band is not None:
+            smoother_kernels.band_add(mode, comp, pos, self.band_out, lv.mask, float(c2), step, x)
 
     @property
     def bytes(self) -> int:
-        """Device memory of the smoother's own arrays (Theta^-1 and the edge work array)."""
-        return 2 * int(np.prod(self.inv_theta.shape)) * np.dtype(self.level.dtype).itemsize
+        """Device memory of the smoother's own arrays (Theta^-1, the edge work array, the band's
+        patch inverses and their work arrays)."""
+        own = 2 * int(np.prod(self.inv_theta.shape)) * np.dtype(self.level.dtype).itemsize
+        if self.band is not None:
+            own += sum(int(np.prod(a.shape)) * (8 if k == 4 else 4) for k, a in enumerate(self.band)) + 16 * self.band_in.shape[0]
+        return own

@@ -17,7 +17,9 @@ smoothed by Chebyshev iteration on M^-1 A with M^-1 = D^-1 + C Theta^-1 C^T, Jac
 and on the discrete curls (``curls.py``), and the transfers are the face interpolation
 (``kernels.FACE``), which keeps the divergence of every fine cell equal to its coarse cell's. Both
 are needed: either alone left the free thick sphere at hundreds of iterations at nu = 0.4999
-(docs/design-notes.md).
+(docs/design-notes.md). Held surfaces carry lambda's scale too, so on that path the coarse levels'
+surface terms are the Galerkin product of the finer level's (``galerkin.py``) and the band around
+them is smoothed by exact vertex-patch solves as well (``patches.py``).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from . import assembly, kernels, smoother_kernels
 from .nitsche import make_surface_operator
 from .operator import Level, Mechanisms, Part, describe_thin_features, dof_bodies, make_coarse_level, unheld_groups
 from .curls import CurlSmoother
+from .galerkin import galerkin_surface
 
 COARSEST_DOFS = 1000  # no coarser level below this many unknowns
 # A level whose material cells are nearly all cut no longer resolves the part (thin walls, small
@@ -72,13 +75,6 @@ FIXED_SHARE = 0.25
 ROBUST_RATIO = 4.0
 CURL_DEGREE = 8  # Chebyshev steps on M^-1 A (curl smoothing) before and after the coarse correction
 CURL_SPREAD = 30.0
-# On that path the coarse levels' holds are built as for a material of COARSE_HOLD_LAMBDA x lambda:
-# a coarse field that meets the coarse hold does not meet the fine one once prolonged, and the
-# mismatch is lambda-weighted; a stiffer coarse hold leaves the held band to the fine smoothing.
-# Shell held below z = -0.8, nu 0.4999 (rtol 1e-6): 64^3 95 / 542 / 150 / 70 / 70 CG iterations
-# at 1 / 0 / 0.1 / 4 / 16 (64: the coarsest factor broke down); 128^3 86 -> 66 (119 -> 91 s, nu
-# 0.3: 13 iterations, 15 s); nu 0.3 itself does not take this path (64^3: 10 either way).
-COARSE_HOLD_LAMBDA = 4.0
 
 
 class Multigrid:
@@ -102,12 +98,13 @@ class Multigrid:
             coarse = make_coarse_level(last)
             if cut_share(coarse) > MAX_CUT_SHARE:
                 break
-            if fine.hold is not None:  # the displacement boundaries, rediscretised on this level
-                lam = coarse.lam * (COARSE_HOLD_LAMBDA if self.robust else 1.0)
+            if fine.hold is not None and self.robust:  # lambda-scaled holds: the Galerkin product
+                coarse.set_surface(galerkin_surface(last, coarse, self.kind), fine.hold)
+            elif fine.hold is not None:  # the displacement boundaries, rediscretised on this level
                 # a preconditioner's terms need no per-triangle rule: a scanned mesh's 1.8 M points on
                 # every level were most of its setup (engine.clusters)
                 quad = fine.hold.quadrature(2 * coarse.spacing, merge=True)
-                coarse.set_surface(make_surface_operator(coarse, quad, lam), fine.hold)
+                coarse.set_surface(make_surface_operator(coarse, quad), fine.hold)
             self.levels.append(coarse)
         # coarse tiles around each fine tile's parent (prolongation), fine tiles around each
         # coarse tile's children (restriction)

@@ -186,3 +186,17 @@ def hybrid_step(d: ti.template(), mode: ti.i32, n: ti.i32, nbr: ti.types.ndarray
                 x[a, p] = stored(x, x[a, p] + s)
             else:
                 x[a, p] = stored(x, c2 * z)
+
+
+@ti.kernel(fastcache=True)
+def band_add(mode: ti.i32, comp: ti.types.ndarray(), pos: ti.types.ndarray(), w: ti.types.ndarray(),
+             mask: ti.types.ndarray(), c2: float, step: ti.types.ndarray(), x: ti.types.ndarray()):
+    """What the vertex patches' w = Z r (``patches.py``; at the band's DOFs comp[k], pos[k]) add to
+    :func:`hybrid_step`'s z, after it: x += c2 mask w, and step too unless ``mode`` is APPLY (each
+    DOF once: no races)."""
+    for k in range(comp.shape[0]):
+        a, p = comp[k], pos[k]
+        v = c2 * mask[a, p] * w[k]
+        x[a, p] = stored(x, x[a, p] + v)
+        if mode != APPLY:
+            step[a, p] = stored(step, step[a, p] + v)

@@ -1,0 +1,156 @@
+"""Exact solves on vertex patches in the band around held surfaces: the smoothing near
+incompressibility that the curls cannot give there (``curls.py``).
+
+Beside a held surface the lambda term does not weigh the plain divergence: a held cell weighs its
+finite-volume divergence with the faces' apertures (``held.py``) and Nitsche's points tie the
+samples around them, so the curls, divergence-free for the plain divergence, are stiff at lambda's
+scale there and smooth nothing. The fields that keep those constraints are other local
+combinations of faces. An exact solve on the faces around each vertex (the 2^(d-1) faces of each
+normal that touch it: 12 in 3D, 4 in 2D; Schoeberl 1999's patches) finds whichever of them its
+patch holds, so near the surface the smoothing is
+
+    M^-1 = D^-1 + C Theta^-1 C^T + sum_p R_p^T A_p^-1 R_p   (p: the band's vertices),
+
+additive and symmetric. The band is every vertex whose patch has a face within one index of a DOF
+the surface terms touch; its inverses are summed into one sparse matrix over the band's DOFs,
+applied as the surface terms are (a gather and a CSR pass). Held shell at nu 0.4999 (Galerkin
+coarse holds, ``galerkin.py``), CG iterations 64^3 / 128^3: 51 / 81 without the patches, 31 / 45
+with them (docs/design-notes.md, "Held bands: Galerkin coarse holds and vertex patches").
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import scipy.ndimage as ndi
+import scipy.sparse as sp
+
+from ..grid import axis_pairs
+from .operator import Level
+from .sampling import _unique_rows
+
+CHUNK = 20_000  # patches inverted per batch (bounds the [patches, 12, 12] temporaries: 23 MB each)
+
+
+def vertex_patches(level: Level) -> np.ndarray | None:
+    """The band's patches: DOF keys a * size + position [patches, d 2^(d-1)], -1 where the face is
+    not an unknown; None when the level has no surface terms or no patch has two unknowns."""
+    sf, lay, d, size = level.surface, level.layout, level.dim, level.size
+    if sf is None or not len(sf.pos):
+        return None
+    near = np.zeros(size, dtype=np.uint8)
+    near[sf.pos] = 1
+    dense = lay.dense(near)
+    # vertex V's patch holds the faces V - {0, 1}^d (one step back across each other axis): a
+    # surface DOF within one index of one lies in V + [-2, 1] per axis
+    for a in range(d):
+        dense = ndi.maximum_filter1d(dense, 4, axis=a, mode="constant")
+    vertices = np.argwhere(dense > 0)
+    columns = []
+    for a in range(d):
+        for o in itertools.product(*[(0,) if k == a else (-1, 0) for k in range(d)]):
+            at = lay.positions(vertices + np.asarray(o))
+            ok = at >= 0
+            ok[ok] = level.free[a, at[ok]]
+            columns.append(np.where(ok, a * size + at, -1))
+    keys = np.stack(columns, axis=1)
+    keys = keys[(keys >= 0).sum(axis=1) >= 2]
+    return keys if len(keys) else None
+
+
+def band_inverse(level: Level) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix] | None:
+    """(comp [n], pos [n], Z [n, n]) with Z = sum_p R_p^T A_p^-1 R_p over the band's patches
+    (``vertex_patches``), A the level's operator (bulk, shift, surface terms) on its unknowns;
+    None when there is no band."""
+    patches = vertex_patches(level)
+    if patches is None:
+        return None
+    size = level.size
+    dofs = np.unique(patches[patches >= 0])
+    block = operator_block(level, dofs).tocoo()
+    n = len(dofs)
+    entry_keys = block.row.astype(np.int64) * n + block.col
+    order = np.argsort(entry_keys)
+    entry_keys, entry_vals = entry_keys[order], block.data[order]
+    local = np.where(patches >= 0, np.searchsorted(dofs, np.maximum(patches, 0)), -1)
+    m = local.shape[1]
+    rows, cols, vals = [], [], []
+    for start in range(0, len(local), CHUNK):
+        idx = local[start : start + CHUNK]
+        on = idx >= 0
+        pair = np.maximum(idx, 0)[:, :, None] * n + np.maximum(idx, 0)[:, None, :]
+        at = np.minimum(np.searchsorted(entry_keys, pair), len(entry_keys) - 1)
+        a = np.where((entry_keys[at] == pair) & on[:, :, None] & on[:, None, :], entry_vals[at], 0.0)
+        a[:, np.arange(m), np.arange(m)] += ~on  # a missing face: a unit pivot, dropped below
+        inv = np.linalg.inv(a)
+        both = on[:, :, None] & on[:, None, :]
+        rows.append(np.broadcast_to(idx[:, :, None], both.shape)[both])
+        cols.append(np.broadcast_to(idx[:, None, :], both.shape)[both])
+        vals.append(inv[both])
+    z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), (n, n))
+    return dofs // size, dofs % size, z
+
+
+def operator_block(level: Level, keys: np.ndarray) -> sp.csr_matrix:
+    """A[keys][:, keys] [n, n] of the level's operator (keys a * size + position, sorted unknowns):
+    the bulk energy's cells and edges that touch them (the weights the kernels read), the shift's
+    mass and the surface terms."""
+    lay, d, size, h = level.layout, level.dim, level.size, level.spacing
+    comp, pos = keys // size, keys % size
+    index = lay.index_of(pos).astype(np.int64)
+    eye = np.eye(d, dtype=np.int64)
+    n = len(keys)
+
+    def column(a: int, at: np.ndarray) -> np.ndarray:
+        """Compact column of component a's DOFs at indices ``at`` [k, d]; -1 outside ``keys``."""
+        p = lay.positions(at)
+        key = a * size + np.maximum(p, 0)
+        j = np.minimum(np.searchsorted(keys, key), n - 1)
+        return np.where((p >= 0) & (keys[j] == key), j, -1)
+
+    def strains(taps: list[tuple[int, np.ndarray, float]], count: int) -> sp.csr_matrix:
+        """[count, n]: one row per control volume, sum of coef u_a(at) over its taps within ``keys``."""
+        r, c, v = [], [], []
+        for a, at, coef in taps:
+            j = column(a, at)
+            on = j >= 0
+            r.append(np.nonzero(on)[0])
+            c.append(j[on])
+            v.append(np.full(int(on.sum()), coef))
+        return sp.csr_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), (count, n))
+
+    # cells beside the DOFs: h eps_kk = u_k(C + e_k) - u_k(C)
+    cells = _unique_rows(np.concatenate([index - eye[a] * (comp == a)[:, None] for a in range(d)] + [index]))[0]
+    vc = _at(level.vc_host, lay, cells)
+    moduli = level.mu * 2.0 * np.eye(d) + level.lam * np.ones((d, d))
+    normal = [strains([(k, cells + eye[k], 1.0 / h), (k, cells, -1.0 / h)], len(cells)) for k in range(d)]
+    k_mat = sp.csr_matrix((n, n))
+    for i, j in itertools.product(range(d), repeat=2):
+        k_mat = k_mat + normal[i].T @ sp.diags(moduli[i, j] * vc) @ normal[j]
+    # shear edges beside the DOFs: 2 h eps_ab = u_a(E) - u_a(E - e_b) + u_b(E) - u_b(E - e_a)
+    for q, (a, b) in enumerate(axis_pairs(d)):
+        near = np.concatenate([index[comp == a] + s * eye[b] for s in (0, 1)] + [index[comp == b] + s * eye[a] for s in (0, 1)])
+        if not len(near):
+            continue
+        edges = _unique_rows(near)[0]
+        shear = strains([(a, edges, 0.5 / h), (a, edges - eye[b], -0.5 / h), (b, edges, 0.5 / h),
+                         (b, edges - eye[a], -0.5 / h)], len(edges))
+        k_mat = k_mat + shear.T @ sp.diags(4.0 * level.mu * _at(level.ve_host[q], lay, edges)) @ shear
+    k_mat = h**d * k_mat
+    if level.shift != 0.0 and level.mass is not None:
+        k_mat = k_mat + sp.diags(level.shift * level.mass.to_numpy()[comp, pos])
+    sf = level.surface
+    if sf is not None:
+        skeys = sf.comp.astype(np.int64) * size + sf.pos
+        j = np.minimum(np.searchsorted(keys, skeys), n - 1)
+        on = keys[j] == skeys
+        pick = sp.csr_matrix((np.ones(int(on.sum())), (j[on], np.nonzero(on)[0])), (n, len(skeys)))
+        k_mat = k_mat + pick @ sf.matrix() @ pick.T
+    return sp.csr_matrix(k_mat)
+
+
+def _at(values: np.ndarray, lay, index: np.ndarray) -> np.ndarray:
+    """values [size] at indices [k, d] (0 outside the kept tiles)."""
+    p = lay.positions(index)
+    return np.where(p >= 0, values[np.maximum(p, 0)], 0.0)
