@@ -45,7 +45,8 @@ AREA_TOLERANCE = 1e-7  # of a cell face: a cell's held area vector this small ho
 NORMAL_TOLERANCE = 1e-6  # |n - P n|: the hold prescribes the normal component
 # a rim cell whose held area vector is below this share of its whole one keeps its volumetric term: the
 # held shell at 64^3, nu 0.4999, took 121 CG iterations with every rim cell in a group, 76 so; the rim
-# sphere at h = 1/20 7.29e-3 and 8.13e-3 from its h = 1/60 reference (0.25: 79, 8.12e-3; 0.1: 108, 7.86e-3)
+# sphere at h = 1/20 7.29e-3 and 8.13e-3 from its h = 1/60 reference (0.25: 79, 8.12e-3; 0.1: 108, 7.86e-3);
+# with the Galerkin coarse holds and band patches (multigrid.py) 44 / 31 / 31 iterations at 0 / 0.5 / 0.9
 RIM_SHARE = 0.5
 PLANE_NUDGE = 1e-7  # [cells]: a point moved this far inwards along its normal finds its cell
 
