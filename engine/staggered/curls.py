@@ -9,12 +9,12 @@ divergence-free in every cell, four faces each, and span the divergence-free fie
     M^-1 = D^-1 + C Theta^-1 C^T,   Theta = diag(C^T A C)
 
 smooths them at the mu scale while D^-1 handles the rest. M is symmetric: Chebyshev iteration on
-M^-1 A keeps the V-cycle a CG preconditioner. Beside held surfaces the curls are stiff (the held
-cells weigh another divergence); exact solves on the band's vertex patches (``patches.py``) add
-to M^-1 there. An exact solve on the 12 faces around each vertex
+M^-1 A keeps the V-cycle a CG preconditioner. An exact solve on the 12 faces around every vertex
 (additive Schwarz; the classical robust smoother, Schoeberl 1999) reached the same iteration
 counts at 3.3 operator applies per step and 84 MB of patch inverses on the 64^3 shell; this costs
-about one apply and two edge arrays (docs/design-notes.md).
+about one apply and two edge arrays (docs/design-notes.md). Beside held surfaces the curls are
+stiff (held cells weigh another divergence), so there, and only there, those vertex patches' exact
+solves are added to M^-1 (``patches.py``).
 """
 
 from __future__ import annotations
