@@ -300,21 +300,18 @@ def cut_share(level: Level) -> float:
     return np.count_nonzero((vc > 0) & (vc < 1)) / solid if solid else 1.0
 
 
-def _largest_eigenvalue(level: Level, v, step=None) -> float:
-    """Power iteration estimate of the largest eigenvalue of M^-1 A on the free DOFs (``v``: a
-    work array of the level; ``step(v, c)``: v <- c M^-1 A v, by default with M = D in one pass).
-    Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75 after 40): MARGIN times this
-    estimate is the smoothers' upper bound as tuned."""
-    if step is None:
-        def step(v, c):
-            level.preconditioned(v, v, c)  # D^-1 vanishes off the free DOFs
+def _largest_eigenvalue(level: Level, v) -> float:
+    """Power iteration estimate of the largest eigenvalue of D^-1 A on the free DOFs (``v``: a work
+    array of the level). Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75 after
+    40): MARGIN times this estimate is the point smoothers' upper bound as tuned (the curl path's
+    comes from :func:`_lanczos_largest`)."""
     kernels.random_fill(level.dim, v, level.mask, 7)
     estimate = 1.0
     norm = np.sqrt(kernels.dot(level.dim, v, v))
     for _ in range(POWER_STEPS):
         if norm == 0.0:
             return 1.0
-        step(v, 1.0 / norm)
+        level.preconditioned(v, v, 1.0 / norm)  # D^-1 vanishes off the free DOFs
         norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
     return float(estimate)
 
