@@ -208,7 +208,8 @@ def test_block_compressed_between_clamped_faces_at_nu_04999():
     # engine/staggered/held.py); the block moved 0.3 h, its held faces inside cells: 8.72e-3 / 2.51e-2 at
     # nu 0.3, 2.46e-2 / 3.37e-2 at 0.4999; volume change / (DELTA area) -0.662 at 0.3, -7.2e-4 at
     # 0.4999 (measured before that change); 16 and 24 CG iterations at h = 1/32 (likewise; 16 and 20 since
-    # the coarse levels' holds are the Galerkin product of the fine level's, engine/staggered/galerkin.py)
+    # the coarse levels' holds are the Galerkin product of the fine level's, engine/staggered/galerkin.py;
+    # 16 and 17 with multigrid.CURL_SPREAD 60)
     out = {}
     for nu in (0.3, 0.4999):
         runs = {h: block_run(nu, h) for h in (1 / 32, 1 / 16, 1 / 8)}

@@ -15,7 +15,8 @@ additive and symmetric. The band is every vertex whose patch has a face within o
 the surface terms touch; its inverses are summed into one sparse matrix over the band's DOFs,
 applied as the surface terms are (a gather and a CSR pass). Held shell at nu 0.4999 (Galerkin
 coarse holds, ``galerkin.py``), CG iterations 64^3 / 128^3: 51 / 81 without the patches, 32 / 46
-with them (and the smoothing bound from Lanczos, ``multigrid._lanczos_largest``) (docs/design-notes.md, "Held bands: Galerkin coarse holds and vertex patches").
+with them (and the smoothing bound from Lanczos, ``multigrid._lanczos_largest``), 25 / 32 with the
+wider interval that they allow (``multigrid.CURL_SPREAD``) (docs/design-notes.md, "Held bands: Galerkin coarse holds and vertex patches").
 """
 
 from __future__ import annotations
