@@ -75,10 +75,10 @@ FIXED_SHARE = 0.25
 # Above this lambda / mu the levels are smoothed on the curls too (nu = 0.4: lambda / mu = 4).
 ROBUST_RATIO = 4.0
 CURL_DEGREE = 8  # Chebyshev steps on M^-1 A (curl smoothing) before and after the coarse correction
-# ... on [upper / CURL_SPREAD, upper]. With the band's patches and the Lanczos bound, held shell
-# (64^3, CG iterations) at spread 30 / 60 / 100: nu 0.45 10 / 14 / 19, 0.4999 32 / 25 / 24, 0.49999
-# 42 / 34 / 30; 128^3 at 0.4999 46 -> 32 (30 -> 60); the free thick sphere (h = 1/16) 9 / 11 / 12 at
-# 0.4999 (before the patches 30 was best: 71 / 131 at 30 / 100)
+# The curl smoothing takes eigenvalues in [upper / CURL_SPREAD, upper]. With the band's patches and
+# the Lanczos bound, the held shell (64^3, CG iterations) at spread 30 / 60 / 100: nu 0.45 10 / 14 /
+# 19, 0.4999 32 / 25 / 24, 0.49999 42 / 34 / 30; 128^3 at 0.4999 46 -> 32 (30 -> 60); the free thick
+# sphere (h = 1/16) 9 / 11 / 12 at 0.4999 (before the patches 30 was best: 71 / 131 at 30 / 100)
 CURL_SPREAD = 60.0
 
 
