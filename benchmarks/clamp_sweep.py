@@ -7,7 +7,8 @@ The bar (1 m x W x W, W = 0.25 m, E = 1 MPa, Poisson's ratio --nu) on a pinned g
 moved by delta h for delta = 0, 0.1, ..., 0.9 with the other face on a grid plane:
 
 - ``tip``: the loaded face moves (length 1 + delta h), ``clamp``: the held face (length 1 - delta h),
-  ``both``: the bar moves whole (the suite's offsets along the axis alone); tip deflection over
+  ``both``: the bar moves whole (the suite's offsets along the axis alone), ``across`` / ``load``: the
+  bar moves whole across the load (y) / along it (z, its partial layers bend); tip deflection over
   Timoshenko's for its length, under the suite's end traction;
 - ``pull_clamped`` / ``pull_roller``: the held face moves, the far face pulled along the axis; tip
   u_x over T L / E, the face held in all components or in u_x alone (rollers on two symmetry planes
@@ -23,7 +24,7 @@ import json
 
 import numpy as np
 
-SWEEPS = ("tip", "clamp", "both", "pull_clamped", "pull_roller")
+SWEEPS = ("tip", "clamp", "both", "across", "load", "pull_clamped", "pull_roller")
 
 
 def sweep(kind: str, cells: int, method: dict, nu: float) -> list[float]:
@@ -42,8 +43,10 @@ def sweep(kind: str, cells: int, method: dict, nu: float) -> list[float]:
     grid = offset_grid((round(1 / h) + 1, cells, cells), h)
     out = []
     for delta in np.arange(10) / 10:
-        length, start = {"tip": (1 + delta * h, 0.0), "both": (1.0, delta * h)}.get(kind, (1 - delta * h, delta * h))
-        bar = Bar(length, WIDTH, ALIGNED, np.array([start, WIDTH / 2, WIDTH / 2]))
+        length, start = {"tip": (1 + delta * h, 0.0), "both": (1.0, delta * h), "across": (1.0, 0.0),
+                         "load": (1.0, 0.0)}.get(kind, (1 - delta * h, delta * h))
+        side = delta * h * np.array([kind == "across", kind == "load"], dtype=float)
+        bar = Bar(length, WIDTH, ALIGNED, np.array([start, WIDTH / 2 + side[0], WIDTH / 2 + side[1]]))
         if not kind.startswith("pull"):
             solved = solve(cantilever_job(method, h, bar, nu=nu), bar.mesh(), grid=grid, condition=False)
             beam = timoshenko_tip(TIP_TRACTION * WIDTH**2, length, WIDTH, E0, nu)
