@@ -105,12 +105,3 @@ class CurlSmoother:
                                      float(c1), float(c2))  # numpy scalars defeat the launcher's argument cache
         if self.band is not None:
             smoother_kernels.band_add(mode, comp, pos, self.band_out, lv.mask, float(c2), step, x)
-
-    @property
-    def bytes(self) -> int:
-        """Device memory of the smoother's own arrays (Theta^-1, the edge work array, the band's
-        patch inverses and their work arrays)."""
-        own = 2 * int(np.prod(self.inv_theta.shape)) * np.dtype(self.level.dtype).itemsize
-        if self.band is not None:
-            own += sum(int(np.prod(a.shape)) * (8 if k == 4 else 4) for k, a in enumerate(self.band)) + 16 * self.band_in.shape[0]
-        return own
