@@ -8,11 +8,13 @@ Variants: ``cycle`` (the engine's V-cycle, every level), ``cycle2`` (the engine'
 lambda / mu = 4, with the coarse operator P^T A P), ``tr-galerkin[:slopes]`` (the
 prolongation of prolongation.py, P^T A P), ``tr-rediscretised[:slopes]`` (that prolongation with
 the engine's coarse level: rediscretised bulk plus P^T S P of the fine surface terms),
-``check`` (fine-cell divergences of a prolonged random field against the coarse cells').
+``check`` (fine-cell divergences of a prolonged random field against the coarse cells'),
+``ratio`` (40 steps of power iteration on Ac^-1 P^T A P with the engine's two levels: how much more
+fine energy a prolonged coarse mode has than its coarse level gives it, and where).
 The two-level variants keep the engine's smoothing (the curl path's Chebyshev steps on the fine
 level, run on the device) and solve the coarse level exactly on the host (PARDISO). Each prints
-PCG iterations to rtol 1e-6 on a random right-hand side and the extreme Ritz values of B A
-(40 Lanczos steps).
+the PCG iteration at which the residual of a random right-hand side fell under rtol 1e-6 and the
+extreme Ritz values of B A from the same run's 40 steps.
 """
 
 from __future__ import annotations
@@ -59,37 +61,9 @@ def held_shell(res: int, nu: float):
     return captured["problem"]
 
 
-def lanczos_ritz(problem, precondition, steps: int = 40, seed: int = 0) -> np.ndarray:
-    """Ritz values of B A from ``steps`` PCG steps on a random right-hand side."""
-    lv, space = problem.level, problem.space
-    rng = np.random.default_rng(seed)
-    b = device_array((rng.standard_normal(lv.free.shape) * lv.free).astype(lv.dtype))
-    x, r, z, q, p = (space.zeros() for _ in range(5))
-    space.copy(b, r)
-    precondition(r, z)
-    space.copy(z, p)
-    rz = space.dot(r, z)
-    alphas, betas = [], []
-    for _ in range(steps):
-        lv.apply(p, q)
-        alpha = rz / space.dot(p, q)
-        space.axpy(alpha, p, x)
-        space.axpy(-alpha, q, r)
-        precondition(r, z)
-        rz, beta = space.dot(r, z), space.dot(r, z) / rz
-        alphas.append(alpha)
-        betas.append(beta)
-        space.xpby(z, beta, p)
-    n = len(alphas)
-    t = np.zeros((n, n))
-    for i in range(n):
-        t[i, i] = 1 / alphas[i] + (betas[i - 1] / alphas[i - 1] if i else 0.0)
-        if i + 1 < n:
-            t[i, i + 1] = t[i + 1, i] = np.sqrt(betas[i]) / alphas[i]
-    return np.linalg.eigvalsh(t)
-
-
-def pcg_iterations(problem, precondition, rtol: float = 1e-6, seed: int = 5, cap: int = 300) -> int:
+def pcg_spectrum(problem, precondition, steps: int = 40, rtol: float = 1e-6, seed: int = 0) -> tuple[int, np.ndarray]:
+    """(the PCG iteration whose residual first fell under ``rtol``, or ``steps``; the Ritz values of
+    B A from the Lanczos coefficients of all ``steps`` steps), from a random right-hand side."""
     lv, space = problem.level, problem.space
     rng = np.random.default_rng(seed)
     b = device_array((rng.standard_normal(lv.free.shape) * lv.free).astype(lv.dtype))
@@ -99,18 +73,29 @@ def pcg_iterations(problem, precondition, rtol: float = 1e-6, seed: int = 5, cap
     precondition(r, z)
     space.copy(z, p)
     rz = space.dot(r, z)
-    for i in range(cap):
+    alphas, betas, reached = [], [], steps
+    for i in range(steps):
         lv.apply(p, q)
         alpha = rz / space.dot(p, q)
         space.axpy(alpha, p, x)
         space.axpy(-alpha, q, r)
-        if np.sqrt(space.dot(r, r)) / bnorm < rtol:
-            return i + 1
+        if reached == steps and np.sqrt(space.dot(r, r)) / bnorm < rtol:
+            reached = i + 1
         precondition(r, z)
-        rz2 = space.dot(r, z)
-        space.xpby(z, rz2 / rz, p)
-        rz = rz2
-    return cap
+        rz_next = space.dot(r, z)
+        alphas.append(alpha)
+        betas.append(rz_next / rz)
+        space.xpby(z, rz_next / rz, p)
+        rz = rz_next
+    return reached, ritz(alphas, betas)
+
+
+def ritz(alphas: list[float], betas: list[float]) -> np.ndarray:
+    """Eigenvalues of the Lanczos tridiagonal matrix of CG's step lengths and direction updates."""
+    a, b = np.asarray(alphas), np.asarray(betas)
+    diagonal = 1.0 / a + np.concatenate([[0.0], b[:-1] / a[:-1]])
+    off = np.sqrt(b[:-1]) / a[:-1]
+    return np.linalg.eigvalsh(np.diag(diagonal) + np.diag(off, 1) + np.diag(off, -1))
 
 
 class TwoLevel:
@@ -162,6 +147,35 @@ class TwoLevel:
 
         return apply
 
+    def energy_ratio(self, steps: int = 40) -> str:
+        """The largest (P v)^T A (P v) / v^T Ac v of the engine's two levels (Ac: its coarse level,
+        applied matrix-free; P: the cycle's own prolongation) by power iteration on Ac^-1 P^T A P,
+        and how the top mode's x (A x) per fine DOF changes sign from one z-layer to the next."""
+        f, c, m, d = self.fine, self.coarse, self.mg, self.fine.dim
+
+        def galerkin(v):
+            x, y, out = f.zeros(), f.zeros(), c.zeros()
+            kernels.prolong_add(d, m.kind, f.coords, m.parents[0], f.mask, v, x)
+            f.apply(x, y)
+            kernels.restrict(d, m.kind, c.coords, m.children[0], c.mask, y, out)
+            return out, x, y
+
+        v = device_array((np.random.default_rng(1).standard_normal(c.free.shape) * c.free).astype(c.dtype))
+        for _ in range(steps):
+            z = c.zeros()
+            m.coarse.solve(galerkin(v)[0], z)
+            az = c.zeros()
+            c.apply(z, az)
+            quotient = kernels.dot(d, z, galerkin(z)[0]) / kernels.dot(d, z, az)
+            v = device_array((z.to_numpy() / np.sqrt(kernels.dot(d, z, az))).astype(c.dtype))
+        _, x, y = galerkin(v)
+        energy = (x.to_numpy() * y.to_numpy())[:, : f.layout.count * f.layout.tile_size]
+        layers = np.bincount(f.layout.indices()[:, 2], weights=energy.sum(axis=0))
+        layers = layers[np.abs(layers) > 1e-3 * np.abs(layers).max()]
+        flips = int((np.sign(layers[1:]) != np.sign(layers[:-1])).sum())
+        return (f"largest ratio {quotient:.2f} after {steps} steps; its energy changes sign between "
+                f"{flips} of {len(layers) - 1} successive z-layers")
+
     def divergence_check(self, P: sp.csr_matrix, keys: np.ndarray) -> float:
         """max |div_fine(P v) - div_coarse(v)| / max |div_coarse(v)| over full fine cells in full
         coarse cells, v random."""
@@ -191,8 +205,7 @@ def main(argv: list[str]) -> None:
     two = None
 
     def report(name, precondition) -> None:
-        its = pcg_iterations(problem, precondition)
-        ev = lanczos_ritz(problem, precondition)
+        its, ev = pcg_spectrum(problem, precondition)
         print(f"{name}: {its} iterations, Ritz values of B A {ev[0]:.3f} ... {ev[-1]:.3f}, "
               f"condition {ev[-1] / ev[0]:.2f}", flush=True)
 
@@ -216,6 +229,8 @@ def main(argv: list[str]) -> None:
         elif kind == "tr-rediscretised":
             P, keys = two.tr(slopes or "central")
             report(v, two.cycle(P, two.rediscretised(P, keys)))
+        elif kind == "ratio":
+            print(f"ratio: {two.energy_ratio()}", flush=True)
         elif kind == "check":
             P, keys = two.tr(slopes or "central")
             print(f"check: fine-cell divergence of P v against the coarse cell's: {two.divergence_check(P, keys):.1e} (relative)")

@@ -6,79 +6,99 @@ fit A1.
 
     PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/three_levels.py 64 0.4999
 """
-import sys
-sys.path.insert(0, 'prototypes/div_preserving_prolongation')
-import numpy as np
-from harness import Cholesky, mg, operator_block
-from harness import held_shell, pcg_iterations, lanczos_ritz
-from prolongation import tr_prolongation
-from engine.staggered import smoother_kernels
 
-res, nu = int(sys.argv[1]), float(sys.argv[2])
-problem = held_shell(res, nu)
-m3 = mg.Multigrid(problem.level, max_levels=3)
-f, c1, c2 = m3.levels
-print(f"engine, 3 levels: {pcg_iterations(problem, m3.precondition)} iterations (before its level 1 is changed below)", flush=True)
-comp, pos = np.nonzero(f.free)
-keys = comp.astype(np.int64) * f.size + pos
-A = operator_block(f, keys)
-P1, k1 = tr_prolongation(f, c1, comp, pos)
-assert np.all(c1.free[k1 // c1.size, k1 % c1.size])
-A1 = (P1.T @ A @ P1).tocsr()
-comp1, pos1 = k1 // c1.size, k1 % c1.size
-P2, k2 = tr_prolongation(c1, c2, comp1, pos1)
-A2 = (P2.T @ A1 @ P2).tocsr()
-F2 = Cholesky(A2)
-from engine.staggered.nitsche import SurfaceOperator
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from engine.staggered import galerkin, smoother_kernels
 from engine.staggered.curls import CurlSmoother
-import scipy.sparse as sp
-sf = f.surface
-Ps, ks = tr_prolongation(f, c1, sf.comp, sf.pos)
-Ps = (sp.diags(f.free[sf.comp, sf.pos].astype(float)) @ Ps).tocsr(); pst = Ps.T.tocsr()
-c1.set_surface(SurfaceOperator(ks // c1.size, ks % c1.size, (pst @ sf.mass @ Ps).tocsr(), (pst @ sf.flux).tocsr(), (sf.stress @ Ps).tocsr(), pst @ sf.rhs), f.hold)
-sm = CurlSmoother(c1)
-rd, zd = c1.zeros(), c1.zeros()
-def minv(r):
-    v = np.zeros((c1.dim, c1.size)); v[comp1, pos1] = r
-    rd.from_numpy(v.astype(c1.dtype))
-    sm.apply(smoother_kernels.APPLY, rd, zd, zd, 0.0, 1.0)
-    return zd.to_numpy()[comp1, pos1]
-# Lanczos bound of M^-1 A1
-rng = np.random.default_rng(7)
-r = rng.standard_normal(len(k1)); z = minv(r); p = z.copy(); rz = r @ z; al, be = [], []
-for _ in range(12):
-    q = A1 @ p; a = rz / (p @ q); r = r - a * q; z = minv(r); rz2 = r @ z; b = rz2 / rz
-    al.append(a); be.append(b); p = z + b * p; rz = rz2
-a, b = np.array(al), np.array(be)
-T = np.diag(1 / a + np.concatenate([[0], b[:-1] / a[:-1]])) + np.diag(np.sqrt(b[:-1]) / a[:-1], 1) + np.diag(np.sqrt(b[:-1]) / a[:-1], -1)
-bound = np.linalg.eigvalsh(T)[-1] * mg.MARGIN
-coef = mg.chebyshev_coefficients(bound, mg.CURL_SPREAD, mg.CURL_DEGREE)
-print('level-1 bound', bound, 'A1 entries/row', A1.nnz / A1.shape[0], flush=True)
-def cheb(b, x, first):
-    step = np.zeros_like(b)
-    for i, (ca, cb) in enumerate(coef):
-        if first and i == 0:
-            step = cb * minv(b); x = step.copy()
-        else:
-            step = ca * step + cb * minv(b - A1 @ x); x = x + step
-    return x
-P2t = P2.T.tocsr()
-def level1(b):
-    x = cheb(b, np.zeros_like(b), True)
-    x = x + P2 @ F2.solve(P2t @ (b - A1 @ x))
-    return cheb(b, x, False)
-P1t = P1.T.tocsr()
-rf = f.zeros()
-def cycle(b, x):
-    m3._smooth(0, b, x, first=True)
-    f.residual(x, b, rf)
-    e = P1 @ level1(P1t @ rf.to_numpy()[comp, pos])
-    xv = x.to_numpy(); xv[comp, pos] += e; x.from_numpy(xv.astype(f.dtype))
-    m3._smooth(0, b, x, first=False)
-for name, pre in (('tr-galerkin, 3 levels', cycle),):
-    print(f"{name}: {pcg_iterations(problem, pre)} iterations", flush=True)
+
+sys.path.insert(0, str(Path(__file__).parent))
+from harness import Cholesky, held_shell, mg, operator_block, pcg_spectrum, ritz  # noqa: E402
+from prolongation import tr_prolongation  # noqa: E402
+
+
+def say(name: str, its: int, ev: np.ndarray) -> None:
+    print(f"{name}: {its} iterations, Ritz values of B A {ev[0]:.3f} ... {ev[-1]:.3f}, "
+          f"condition {ev[-1] / ev[0]:.2f}", flush=True)
+
+
+def main(res: int, nu: float) -> None:
+    problem = held_shell(res, nu)
+    m3 = mg.Multigrid(problem.level, max_levels=3)
+    f, c1, c2 = m3.levels
+    say("engine, 3 levels", *pcg_spectrum(problem, m3.precondition))  # before level 1 changes below
+
+    comp, pos = np.nonzero(f.free)
+    A = operator_block(f, comp.astype(np.int64) * f.size + pos)
+    P1, k1 = tr_prolongation(f, c1, comp, pos)
+    A1 = (P1.T @ A @ P1).tocsr()
+    comp1, pos1 = k1 // c1.size, k1 % c1.size
+    P2, _ = tr_prolongation(c1, c2, comp1, pos1)
+    F2 = Cholesky((P2.T @ A1 @ P2).tocsr())
+    P1t, P2t = P1.T.tocsr(), P2.T.tocsr()
+
+    # level 1's smoother: the engine's, its surface terms P^T S P of this prolongation
+    # (galerkin_surface with the prolongation swapped in)
+    own = galerkin.prolongation_matrix
+    galerkin.prolongation_matrix = lambda fine, coarse, c, p, kind: tr_prolongation(fine, coarse, c, p)
     try:
-        ev = lanczos_ritz(problem, pre)
-        print(f"  Ritz values of B A {ev[0]:.3f} ... {ev[-1]:.3f}, condition {ev[-1] / ev[0]:.2f}", flush=True)
-    except np.linalg.LinAlgError:
-        print("  B is not positive definite (a negative Lanczos coefficient)", flush=True)
+        c1.set_surface(galerkin.galerkin_surface(f, c1, m3.kind), f.hold)
+    finally:
+        galerkin.prolongation_matrix = own
+    smoother = CurlSmoother(c1)
+    rd, zd = c1.zeros(), c1.zeros()
+
+    def minv(r: np.ndarray) -> np.ndarray:
+        v = np.zeros((c1.dim, c1.size))
+        v[comp1, pos1] = r
+        rd.from_numpy(v.astype(c1.dtype))
+        smoother.apply(smoother_kernels.APPLY, rd, zd, zd, 0.0, 1.0)
+        return zd.to_numpy()[comp1, pos1]
+
+    # the Chebyshev bound as the engine takes it: 12 CG steps' largest Ritz value of M^-1 A1
+    r = np.random.default_rng(7).standard_normal(len(k1))
+    z = minv(r)
+    p, rz, alphas, betas = z.copy(), r @ z, [], []
+    for _ in range(12):
+        q = A1 @ p
+        alphas.append(rz / (p @ q))
+        r = r - alphas[-1] * q
+        z = minv(r)
+        betas.append((r @ z) / rz)
+        p, rz = z + betas[-1] * p, r @ z
+    bound = ritz(alphas, betas)[-1] * mg.MARGIN
+    coefficients = mg.chebyshev_coefficients(bound, mg.CURL_SPREAD, mg.CURL_DEGREE)
+    print(f"level 1: Chebyshev bound {bound:.1f}, P^T A P {A1.nnz / A1.shape[0]:.1f} entries per row", flush=True)
+
+    def smooth(b: np.ndarray, x: np.ndarray, first: bool) -> np.ndarray:
+        step = np.zeros_like(b)
+        for i, (c_step, c_new) in enumerate(coefficients):
+            step = c_new * minv(b) if first and i == 0 else c_step * step + c_new * minv(b - A1 @ x)
+            x = x + step
+        return x
+
+    def level1(b: np.ndarray) -> np.ndarray:
+        x = smooth(b, np.zeros_like(b), True)
+        x = x + P2 @ F2.solve(P2t @ (b - A1 @ x))
+        return smooth(b, x, False)
+
+    rf = f.zeros()
+
+    def cycle(b, x) -> None:
+        m3._smooth(0, b, x, first=True)
+        f.residual(x, b, rf)
+        xv = x.to_numpy()
+        xv[comp, pos] += P1 @ level1(P1t @ rf.to_numpy()[comp, pos])
+        x.from_numpy(xv.astype(f.dtype))
+        m3._smooth(0, b, x, first=False)
+
+    say("divergence-preserving P, P^T A P, 3 levels", *pcg_spectrum(problem, cycle))
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]), float(sys.argv[2]))
