@@ -34,6 +34,7 @@ from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .fields import StaggeredFields
 from .joined import JOINED, joined_bodies_warning
+from .layers import partial_layer_warning
 from .multigrid import Multigrid
 from . import held
 from .nitsche import hold_patches
@@ -152,6 +153,7 @@ class StaggeredElasticity(StaggeredFields):
         self.warnings += check_holds(self.prescribed, self.surface)
         self.warnings += held.locking_warning(self.patches, self.hold, self.surface_terms, lam, mu)
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
+        self.warnings += partial_layer_warning(level)
         joined = joined_bodies_warning(self.surface, level, grid)
         self.warnings += joined
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
