@@ -145,3 +145,43 @@ def mode(name: str) -> None:
 
 cutstrain.correction = correction
 _el.StaggeredElasticity._divergence_load = _div
+
+
+# LOADFIX=1: the quadrature loads' normal component at the ends of the moved a-lines reach the rows as
+# the energy's uniaxial partition does: each end row's load scaled by 1 + alpha dw / V, alpha the mu
+# share of a uniaxial sigma_aa (1 / (1 + nu))
+_orig_load_vector = _el.StaggeredElasticity._load_vector
+
+
+def _load_vector(self, points):
+    f = _orig_load_vector(self, points)
+    if not G["on"] or os.environ.get("LOADFIX") != "1":
+        return f
+    level = self.level
+    lay = level.layout
+    d, h = lay.dim, level.spacing
+    cell = lay.dense(level.vc_host)
+    box = cell.shape
+    _, cen = G["moments"](G["origin"], h, box)
+    alpha = 2 * (level.lam + level.mu) / (d * level.lam + 2 * level.mu) if d == 3 else 1.0
+    eye = np.eye(d, dtype=int)
+    for a in range(d):
+        dw = pair_deltas(cell, cen)[(a, a)]
+        idx = np.argwhere(dw != 0)
+        for sign, face in ((1, eye[a]), (-1, 0 * eye[a])):
+            nb = idx + sign * eye[a]
+            ok = np.all((nb >= 0) & (nb < np.asarray(box)), axis=1)
+            end = np.zeros(len(idx), bool)
+            end[ok] = cell[tuple(nb[ok].T)] <= 0
+            rows = lay.positions(idx[end] + face)
+            good = rows >= 0
+            I = idx[end][good]
+            if not len(I):
+                continue
+            # the face's mean traction (a uniform one is exact) times the moved weight: nothing added in all
+            t = f[a, rows[good]].sum() / (h ** (d - 1) * cell[tuple(I.T)].sum())
+            f[a, rows[good]] += alpha * t * h ** (d - 1) * dw[tuple(I.T)]
+    return f
+
+
+_el.StaggeredElasticity._load_vector = _load_vector
