@@ -25,6 +25,7 @@ AXES = "xyz"
 
 
 def _fills(level: Level, index: np.ndarray) -> np.ndarray:
+    """Cell fractions [N] at grid indices [N, d]; 0 outside the kept tiles."""
     pos = level.layout.positions(index)
     return np.where(pos >= 0, level.vc_host[np.maximum(pos, 0)], 0.0)
 
