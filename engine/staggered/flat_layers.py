@@ -11,12 +11,15 @@ a. Along a itself nothing moves: the plain fractions' differences along a are al
 linear share of the surface. Only cells whose fill equals their neighbours' along a move (FLAT):
 on curved surfaces the displacement samples beyond the surface already relax the cut cells, and
 moving their weights as well over-corrected (a 0.15% bias on the thick spheres that did not shrink
-with h; docs/design-notes.md, "Partial layers along flat faces"). The lambda term keeps the
-fractions: its weights moved per pair of strains lose definiteness on slivers.
+with h; docs/design-notes.md, "Partial layers along flat faces"). And only where the run of
+material along a ends on loaded or held faces at both ends (``ends_acted``): the lambda term keeps
+the fractions (its weights moved per pair of strains lose definiteness on slivers), so at a free
+end the two parts of sigma_aa = 0 would reach the end row through different weights.
 
 The result is a sparse symmetric correction of the fine level's energy on the DOFs it touches,
-added to the surface operator's mass (``nitsche.combined``), so the matrix-free apply, the
-smoothers and the factor see it; divergence-form loads get the matching correction (``load``).
+added to the surface operator's mass (``nitsche.with_bulk``), so the matrix-free apply, the
+smoothers and the factor see it. Loads reach the moved lines' end rows as the energy does: those
+given at points through ``end_loads``, divergence-form ones through ``load``.
 """
 
 from __future__ import annotations
