@@ -361,7 +361,9 @@ def test_bar_under_sudden_end_load_oscillates_with_the_period_4L_over_c(tmp_path
     # nu = 0: no lateral motion. DG: the penalty per unit area is larger on the half-cut pieces of the
     # section than on its full cells, so the discrete section is not uniform (measured 2.5e-6 k = 2; k = 1
     # 1.5e-4, 5.8e-5 with its whole jump penalised: the rotations of its elements are softer, JUMP_REST)
-    limit = {None: 1e-12, 1: 3e-4, 2: 1e-4}[None if method is None else method["degree"]]
+    # staggered: the STL's float32 faces (0.1 m stored as 0.1000000015) give the two side layers fills
+    # 3e-8 apart, which the partial layers' moved weights follow (flat_layers.py): 2.3e-10 measured
+    limit = {None: 1e-9, 1: 3e-4, 2: 1e-4}[None if method is None else method["degree"]]
     assert np.abs(tip[:, 1:]).max() <= limit * static
     u = tip[:, 0] / static
     # step load from rest: the tip swings between 0 and twice the static displacement

@@ -73,21 +73,16 @@ def test_dg_at_nu_04999_is_finite_with_a_direct_solve_residual_below_1e6():
 OFFSETS = (0.0, 1e-6, 0.4, 0.99, 1 - 1e-6)  # 5 of the suite's 16: the extremes of the staggered sweep
 
 
-@pytest.mark.parametrize("method", [
-    pytest.param("staggered", marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-        "measured tip spread 5.11% at h = W/6 (6.67e-3 at offset 0, 6.69e-3 at 1e-6, 6.51e-3 at 0.4, 6.36e-3 at "
-        "0.99; 2.71% over the 16 offsets at W/8; 11.3% here before the ghost samples beyond loaded faces): partial "
-        "cell layers along the load read their strain at the cell centre, not at the solid's centroid, which "
-        "stiffens bending by about 6 s (1 - s) (h / W)^2 per layer of fill s, and a clamp face inside a cell "
-        "leaves the root 1.4% softer (tests/test_cut_cells.py, docs/benchmarks.md)"))),
-    "dg",
-])
-def test_sub_cell_offsets_change_the_tip_by_less_than_5_percent(method):
+@pytest.mark.parametrize("method", METHODS)
+def test_sub_cell_offsets_change_the_tip_by_less_than_2_percent(method):
+    # staggered: 5.11% here and 2.71% over the suite's 16 offsets at W/8 while the partial cell layers
+    # along the load weighed their normal strains at the cell centres; with their mu weights at the
+    # solid's first moments (engine/staggered/flat_layers.py) 1.42% here, 0.90% at W/8
     rows = S.offsets_case(method, SIZE, OFFSETS)
     runs, summary = rows[:-1], rows[-1]
     assert len(runs) == len(OFFSETS)
     assert all(r.passed for r in runs), [(r.params, r.note) for r in runs if not r.passed]  # finite, converged
-    assert summary.values["spread"] < 0.05, summary.quantity
+    assert summary.values["spread"] < 0.02, summary.quantity
     assert summary.passed
 
 

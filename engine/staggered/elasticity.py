@@ -36,8 +36,8 @@ from .fields import StaggeredFields
 from .joined import JOINED, joined_bodies_warning
 from .layers import partial_layer_warning
 from .multigrid import Multigrid
-from . import held
-from .nitsche import hold_patches
+from . import flat_layers, held
+from .nitsche import hold_patches, with_bulk
 from .operator import Level, dof_bodies, make_fine_level
 from .problem import solves_directly
 from .shares import patch_shares
@@ -149,11 +149,15 @@ class StaggeredElasticity(StaggeredFields):
         # displacement boundaries act on their surface patches, weakly (Nitsche): every active DOF is free
         say("boundaries", 0.3)
         self.surface_terms = held.surface_operator(level, self.hold, self.patches) if self.hold is not None else None
+        self._flat = flat_layers.moved_weights(level, self._acted_cells())
+        bulk = flat_layers.correction(level, self._flat)
+        if bulk is not None:
+            self.surface_terms = with_bulk(self.surface_terms, bulk, level.size)
         level.set_surface(self.surface_terms, self.patches)
         self.warnings += check_holds(self.prescribed, self.surface)
         self.warnings += held.locking_warning(self.patches, self.hold, self.surface_terms, lam, mu)
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
-        self.warnings += partial_layer_warning(level)
+        self.warnings += partial_layer_warning(level, np.unique(np.concatenate([p for p, _ in self._flat])))
         joined = joined_bodies_warning(self.surface, level, grid)
         self.warnings += joined
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
@@ -242,9 +246,24 @@ class StaggeredElasticity(StaggeredFields):
             spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
+        f += flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
+
+    def _acted_cells(self) -> np.ndarray:
+        """Layout positions of the cells holding the surface a load or a hold acts on."""
+        parts = [(x, n) for x, _, _, n in self._load_points.values()]
+        if self.hold is not None:
+            parts.append((self.hold.points, self.hold.normals))
+        for load in self.surface_loads:
+            if load.form == "divergence":
+                x, _, n = patch_quadrature(self.surface, load.region, self.grid.spacing, name=load.name)
+                parts.append((x, n))
+        if not parts:
+            return np.zeros(0, dtype=np.int64)
+        cells = np.concatenate([flat_layers.cells_of(self.level, x, n) for x, n in parts])
+        return np.unique(cells[cells >= 0])
 
     def _divergence_gap(self, load: SurfaceLoad, net: np.ndarray):
         """What the divergence form of ``load`` (its net force ``net`` [d] [N]) misses of the patch's
@@ -335,6 +354,7 @@ class StaggeredElasticity(StaggeredFields):
                     s_ab, s_up = stress(here, edge, a, j), stress(here + eye[j], edge, a, j)
                     value += ve * s_ab - ve_up * s_up - vf * (s_ab - s_up)
                 f[a, pos[rows]] += h ** (d - 1) * share[rows] * value
+        f += flat_layers.load(level, self._flat, stress_field, lambda a, p: _share_at(shares[a], p))
 
     def _active_lookup(self, a: int, index: np.ndarray) -> np.ndarray:
         pos = self.level.layout.positions(index)
@@ -361,7 +381,7 @@ class StaggeredElasticity(StaggeredFields):
         held = None
         if self.surface_terms is not None:
             at = self._surface_dofs()
-            m = self.surface_terms.mass.tocoo()
+            m = self.surface_terms.hold_mass.tocoo()
             held = sp.csr_matrix((m.data, (at[m.row], at[m.col])), shape=(len(body),) * 2)
         out = []
         for dofs, q in free_modes(points, self.dof_comp, fixed, body, held=held):
@@ -491,3 +511,13 @@ class _Space:
 
     def finite(self, x) -> bool:
         return kernels.count_nonfinite(self.level.dim, x) == 0
+
+
+def _share_at(shares: tuple[np.ndarray, np.ndarray], pos: np.ndarray) -> np.ndarray:
+    """The patch share [M] of rows at layout positions ``pos`` (0 for rows that do not see the patch)."""
+    where, share = shares
+    order = np.argsort(where)
+    i = np.clip(np.searchsorted(where[order], pos), 0, max(len(where) - 1, 0))
+    if not len(where):
+        return np.zeros(len(pos))
+    return np.where(where[order][i] == pos, share[order][i], 0.0)

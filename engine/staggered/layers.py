@@ -4,9 +4,10 @@ A face of the solid parallel to a grid plane that falls inside a cell layer leav
 that layer partly filled. The energy reads those cells' strains at their centres, up to h/2 outside
 the solid, so bending across the layers is stiffer by about 6 s (1 - s) (h / W)^2 per partial layer
 of fill s in a part W thick (measured: 2.3% per half-filled layer at W = 8 h, the stress suite's
-offsets; 7% on the bundled cantilever at its own resolution). Weighing those strains at the solid's
-first moments fixed bending but not axial loads (docs/design-notes.md, "Partial layers along flat
-faces"), so the method warns instead, with the cell size that fills the layers.
+offsets; 7% on the bundled cantilever at its own resolution). ``flat_layers`` moves those strains'
+weights to the solid's first moments where the layer's lines end on loaded or held faces; where
+they end on free ones (a cantilever loaded along its length only) the method warns, with the cell
+size that fills the layers (docs/design-notes.md, "Partial layers along flat faces").
 """
 
 from __future__ import annotations
@@ -24,19 +25,20 @@ MIN_THICK = 4.0  # thinner parts (in cells) are the thin-solid warning's: the es
 AXES = "xyz"
 
 
-def _fills(level: Level, index: np.ndarray) -> np.ndarray:
+def fills_at(level: Level, index: np.ndarray) -> np.ndarray:
     """Cell fractions [N] at grid indices [N, d]; 0 outside the kept tiles."""
     pos = level.layout.positions(index)
     return np.where(pos >= 0, level.vc_host[np.maximum(pos, 0)], 0.0)
 
 
-def _run(level: Level, index: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def run_ends(level: Level, index: np.ndarray, axis: int) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Along ``axis`` through each cell of ``index`` [N, d], the contiguous run of cells holding
-    material: (its solid length in cells [N], the fills of its two end cells [N], [N])."""
+    material: (its solid length in cells [N], the fills of its low and high end cells [N] each, the
+    grid indices of those end cells [N, d] each)."""
     step = np.eye(level.dim, dtype=np.int64)[axis]
-    own = _fills(level, index)
+    own = fills_at(level, index)
     total = own.copy()
-    ends = []
+    fills, ends = [], []
     for sign in (-1, 1):
         here = index.copy()
         last = own.copy()
@@ -44,24 +46,28 @@ def _run(level: Level, index: np.ndarray, axis: int) -> tuple[np.ndarray, np.nda
         for _ in range(max(level.layout.box)):
             if not going.any():
                 break
-            nxt = _fills(level, here[going] + sign * step)
+            nxt = fills_at(level, here[going] + sign * step)
             alive = nxt > 0
             rows = np.nonzero(going)[0]
             total[rows[alive]] += nxt[alive]
             last[rows[alive]] = nxt[alive]
             here[rows[alive]] += sign * step
             going[rows[~alive]] = False
-        ends.append(last)
-    return total, ends[0], ends[1]
+        fills.append(last)
+        ends.append(here)
+    return total, fills, ends
 
 
-def partial_layer_warning(level: Level) -> list[str]:
+def partial_layer_warning(level: Level, corrected: np.ndarray | None = None) -> list[str]:
     """A warning when faces parallel to grid planes leave partial cell layers whose estimated bending
     stiffening 6 sum s (1 - s) (h / W)^2 (median over the faces' cells, worst axis) exceeds
-    LAYER_WARNING."""
+    LAYER_WARNING. ``corrected``: layout positions of cells whose weights ``flat_layers`` moved
+    (their layers' bending is corrected, so they do not count)."""
     d, lay, vc, h = level.dim, level.layout, level.vc_host, level.spacing
     pos = np.nonzero((vc > CUT) & (vc < 1.0 - CUT))[0]
     pos = pos[pos < lay.count * lay.tile_size]
+    if corrected is not None:
+        pos = pos[~np.isin(pos, corrected)]
     if not len(pos):
         return []
     index = lay.index_of(pos).astype(np.int64)
@@ -69,16 +75,16 @@ def partial_layer_warning(level: Level) -> list[str]:
     eye = np.eye(d, dtype=np.int64)
     worst = None
     for k in range(d):
-        lo, hi = _fills(level, index - eye[k]), _fills(level, index + eye[k])
+        lo, hi = fills_at(level, index - eye[k]), fills_at(level, index + eye[k])
         layer = np.nonzero(((lo >= 1.0 - CUT) & (hi <= 0.0)) | ((hi >= 1.0 - CUT) & (lo <= 0.0)))[0]
         for j in range(d):  # the face's neighbours along it hold the same fill (a flat face, not an edge)
             if j != k:
                 for sign in (-1, 1):
-                    layer = layer[np.abs(_fills(level, index[layer] + sign * eye[j]) - fill[layer]) <= FLAT]
+                    layer = layer[np.abs(fills_at(level, index[layer] + sign * eye[j]) - fill[layer]) <= FLAT]
         if len(layer) < MIN_CELLS:
             continue
         layer = layer[np.linspace(0, len(layer) - 1, min(len(layer), SAMPLE)).astype(np.int64)]
-        cells, first, last = _run(level, index[layer], k)
+        cells, (first, last), _ = run_ends(level, index[layer], k)
         keep = cells >= MIN_THICK
         if keep.sum() < MIN_CELLS:
             continue

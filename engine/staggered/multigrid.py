@@ -354,7 +354,7 @@ class CoarseSolver:
         if level.surface is not None:
             S = _on_free(level.surface, level.surface.matrix(), self.comp, self.pos, level.size)
             A = A + S
-            held = _on_free(level.surface, level.surface.mass, self.comp, self.pos, level.size)
+            held = _on_free(level.surface, level.surface.hold_mass, self.comp, self.pos, level.size)
         n = A.shape[0]
         self.n = n
         self.mechanisms = 0

@@ -119,6 +119,13 @@ class SurfaceOperator:
     # the points (of the quadrature it was made from) in cut cells off the grid's planes that keep the
     # full terms although lambda / mu calls for the finite-volume divergence (``held``); None: no such call
     kept: np.ndarray | None = None
+    # the part of ``mass`` that is bulk energy, not a hold (``flat_layers``): it holds no rigid mode
+    bulk: sp.csr_matrix | None = None
+
+    @property
+    def hold_mass(self) -> sp.csr_matrix:
+        """The holds' share of ``mass`` (what decides which rigid modes a body keeps)."""
+        return self.mass if self.bulk is None else (self.mass - self.bulk).tocsr()
 
     def matrix(self) -> sp.csr_matrix:
         """S assembled [n, n] (for the coarsest level's factorisation and for tests)."""
@@ -150,6 +157,19 @@ def combined(parts: list[SurfaceOperator], size: int, extra: tuple[np.ndarray, s
     flux = sp.hstack([m @ p.flux for m, p in zip(maps, parts)]).tocsr() if parts else sp.csr_matrix((n, 0))
     stress = sp.vstack([p.stress @ m.T for m, p in zip(maps, parts)]).tocsr() if parts else sp.csr_matrix((0, n))
     return SurfaceOperator(every // size, every % size, sp.csr_matrix(mass), flux, stress, rhs)
+
+
+def with_bulk(operator: SurfaceOperator | None, extra: tuple[np.ndarray, sp.spmatrix, np.ndarray], size: int
+              ) -> SurfaceOperator:
+    """``operator`` (None: no holds) with the bulk energy correction ``extra`` (keys, matrix, load) added
+    to its mass and remembered as its ``bulk``."""
+    merged = combined([] if operator is None else [operator], size, extra)
+    merged.kept = None if operator is None else operator.kept
+    every = merged.comp.astype(np.int64) * size + merged.pos
+    keys, matrix = extra[0], extra[1]
+    m = sp.csr_matrix((np.ones(len(keys)), (np.searchsorted(every, keys), np.arange(len(keys)))), (len(every), len(keys)))
+    merged.bulk = (m @ matrix @ m.T).tocsr()
+    return merged
 
 
 def make_surface_operator(level: Level, quad: HoldQuadrature, lam: float | None = None,

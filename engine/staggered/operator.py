@@ -127,8 +127,10 @@ class Level:
         lower = sp.vstack([surface.stress, surface.flux.T]).tocsr()
         upper = sp.hstack([surface.mass, -surface.flux, -surface.stress.T]).tocsr()
         self._ids = (device_array(surface.comp.astype(np.int32)), device_array(surface.pos.astype(np.int32)))
-        self._csr = [(device_array(m.indptr.astype(np.int32)), device_array(m.indices.astype(np.int32)),
-                      device_array(m.data, np.float64)) for m in (lower, upper)]
+        # an operator of bulk terms alone (``flat_layers`` on a free body) has no stress rows: its empty
+        # CSR arrays get one unread slot (a device array cannot be empty)
+        self._csr = [(device_array(m.indptr.astype(np.int32)), device_array(_slot(m.indices.astype(np.int32))),
+                      device_array(_slot(m.data), np.float64)) for m in (lower, upper)]
         self._z = device_zeros((n + lower.shape[0],), np.float64)
         self._sx = device_zeros((n,), np.float64)
         self._surface_count = n
@@ -587,3 +589,8 @@ def _pruned(layout: TileLayout, spacing: float, vc, ve, vf, lam: float, mu: floa
         layout, order = layout.select(keep)
         vc, ve, vf, active = (reorder(v, order, ts) for v in (vc, ve, vf, active))
     return Level(layout, spacing, vc, ve, vf, lam, mu, dtype, active)
+
+
+def _slot(values: np.ndarray) -> np.ndarray:
+    """``values``, or one zero where it is empty (a device array needs a slot)."""
+    return values if len(values) else np.zeros(1, dtype=values.dtype)

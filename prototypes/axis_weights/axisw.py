@@ -139,8 +139,8 @@ def mode(name: str) -> None:
     except ImportError:  # the engine without the patch: nothing to switch off
         return
     if name != "engine":
-        flat_layers.correction = lambda level: None
-        flat_layers.moved_weights = lambda level: [(np.zeros(0, np.int64), np.zeros(0))] * level.dim
+        flat_layers.correction = lambda level, *rest: None
+        flat_layers.moved_weights = lambda level, *rest: [(np.zeros(0, np.int64), np.zeros(0))] * level.dim
 
 
 cutstrain.correction = correction

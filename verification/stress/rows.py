@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 # Relative residual a direct DG solve must reach: above it the factorisation lost more than 10
 # of 16 digits (backward-stable Cholesky gives ~1e-16 times the condition number).
 DG_RESIDUAL_LIMIT = 1e-6
-OFFSET_SPREAD_LIMIT = 0.05  # (max - min) / |mean| of the tip deflection over the offsets
+OFFSET_SPREAD_LIMIT = 0.02  # (max - min) / |mean| of the tip deflection over the offsets (issue 17's floor)
 SCALING_LIMIT = 1e-8  # relative difference of the E sweep's (scaled) displacements
 RTOL = 1e-8  # solver.rtol of every job (the schema's default)
 MAX_ITERATIONS = 5000
