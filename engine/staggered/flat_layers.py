@@ -189,8 +189,12 @@ def end_loads(level: Level, weights: list[tuple[np.ndarray, np.ndarray]],
         mean = np.where(area[pos] > 0, traction / np.maximum(area[pos], 1e-300), 0.0)
         index = lay.index_of(pos).astype(np.int64)
         for sign, face in ((1, eye[a]), (-1, 0 * eye[a])):
-            end = fills_at(level, index + sign * eye[a]) <= 0.0
+            end = (fills_at(level, index + sign * eye[a]) <= 0.0) & (area[pos] > 0)
             rows = lay.positions(index[end] + face)
-            good = rows >= 0
+            # per face plane, only where the weights moved within the plane sum to zero (a face's
+            # layers, donors and receivers both end there): else a free body's loads lose balance
+            _, plane = np.unique(index[end, a], return_inverse=True)
+            whole = (np.abs(np.bincount(plane, weights=dw[end])) <= 1e-9 * np.bincount(plane, weights=np.abs(dw[end])))[plane]
+            good = (rows >= 0) & whole
             np.add.at(f[a], rows[good], (alpha * h ** (d - 1) * mean[end] * dw[end])[good])
     return f
