@@ -77,7 +77,7 @@ OFFSETS = (0.0, 1e-6, 0.4, 0.99, 1 - 1e-6)  # 5 of the suite's 16: the extremes 
 def test_sub_cell_offsets_change_the_tip_by_less_than_2_percent(method):
     # staggered: 5.11% here and 2.71% over the suite's 16 offsets at W/8 while the partial cell layers
     # along the load weighed their normal strains at the cell centres; with their mu weights at the
-    # solid's first moments (engine/staggered/flat_layers.py) 1.42% here, 0.90% at W/8
+    # solid's first moments (engine/staggered/flat_layers.py) 1.42% here, 0.67% at W/8
     rows = S.offsets_case(method, SIZE, OFFSETS)
     runs, summary = rows[:-1], rows[-1]
     assert len(runs) == len(OFFSETS)

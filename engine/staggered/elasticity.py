@@ -251,8 +251,9 @@ class StaggeredElasticity(StaggeredFields):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f
 
-    def _acted_cells(self) -> np.ndarray:
-        """Layout positions of the cells holding the surface a load or a hold acts on."""
+    def _acted_cells(self) -> list[np.ndarray]:
+        """Per axis a: layout positions of the cells holding surface normal to a that a load or a hold
+        acts on."""
         parts = [(x, n) for x, _, _, n in self._load_points.values()]
         if self.hold is not None:
             parts.append((self.hold.points, self.hold.normals))
@@ -261,9 +262,9 @@ class StaggeredElasticity(StaggeredFields):
                 x, _, n = patch_quadrature(self.surface, load.region, self.grid.spacing, name=load.name)
                 parts.append((x, n))
         if not parts:
-            return np.zeros(0, dtype=np.int64)
-        cells = np.concatenate([flat_layers.cells_of(self.level, x, n) for x, n in parts])
-        return np.unique(cells[cells >= 0])
+            return [np.zeros(0, dtype=np.int64)] * self.dim
+        x, n = (np.concatenate(v) for v in zip(*parts))
+        return [flat_layers.face_cells(self.level, x, n, a) for a in range(self.dim)]
 
     def _divergence_gap(self, load: SurfaceLoad, net: np.ndarray):
         """What the divergence form of ``load`` (its net force ``net`` [d] [N]) misses of the patch's
