@@ -5,9 +5,10 @@ that layer partly filled. The energy reads those cells' strains at their centres
 the solid, so bending across the layers is stiffer by about 6 s (1 - s) (h / W)^2 per partial layer
 of fill s in a part W thick (measured: 2.3% per half-filled layer at W = 8 h, the stress suite's
 offsets; 7% on the bundled cantilever at its own resolution). ``flat_layers`` moves those strains'
-weights to the solid's first moments where the layer's lines end on loaded or held faces; where
-they end on free ones (a cantilever loaded along its length only) the method warns, with the cell
-size that fills the layers (docs/design-notes.md, "Partial layers along flat faces").
+weights to the solid's first moments where the layer's lines end on loaded or held faces normal to
+them; where they end on free or curved ones (a cantilever loaded along its length only) the method
+warns, with the cell size that fills the layers (docs/design-notes.md, "Partial layers along flat
+faces").
 """
 
 from __future__ import annotations
