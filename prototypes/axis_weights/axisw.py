@@ -131,7 +131,7 @@ def _div(self, load, f):
 
 def mode(name: str) -> None:
     """``on``: this prototype's weights (exact moments) in place of the engine's flat layers; ``engine``:
-    the engine as it is (with engine.patch applied, its flat_layers.py); ``off``: neither (the plain
+    the engine as it is (its flat_layers.py); ``off``: neither (the plain
     fractions)."""
     G["on"] = name == "on"
     try:
