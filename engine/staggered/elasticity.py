@@ -517,8 +517,9 @@ class _Space:
 def _share_at(shares: tuple[np.ndarray, np.ndarray], pos: np.ndarray) -> np.ndarray:
     """The patch share [M] of rows at layout positions ``pos`` (0 for rows that do not see the patch)."""
     where, share = shares
-    order = np.argsort(where)
-    i = np.clip(np.searchsorted(where[order], pos), 0, max(len(where) - 1, 0))
     if not len(where):
         return np.zeros(len(pos))
-    return np.where(where[order][i] == pos, share[order][i], 0.0)
+    order = np.argsort(where)
+    where, share = where[order], share[order]
+    i = np.minimum(np.searchsorted(where, pos), len(where) - 1)
+    return np.where(where[i] == pos, share[i], 0.0)
