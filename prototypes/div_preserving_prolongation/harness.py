@@ -9,6 +9,7 @@ lambda / mu = 4, with the coarse operator P^T A P), ``tr-galerkin[:slopes]`` (th
 prolongation of prolongation.py, P^T A P), ``tr-rediscretised[:slopes]`` (that prolongation with
 the engine's coarse level: rediscretised bulk plus P^T S P of the fine surface terms),
 ``check`` (fine-cell divergences of a prolonged random field against the coarse cells'),
+``degree=N`` (the curl smoothing's Chebyshev degree for the variants after it),
 ``ratio`` (40 steps of power iteration on Ac^-1 P^T A P with the engine's two levels: how much more
 fine energy a prolonged coarse mode has than its coarse level gives it, and where).
 The two-level variants keep the engine's smoothing (the curl path's Chebyshev steps on the fine
@@ -210,6 +211,10 @@ def main(argv: list[str]) -> None:
               f"condition {ev[-1] / ev[0]:.2f}", flush=True)
 
     for v in variants:
+        if v.startswith("degree="):  # the curl smoothing's Chebyshev degree for the variants after it
+            mg.CURL_DEGREE = int(v.split("=")[1])
+            print(f"curl smoothing degree {mg.CURL_DEGREE}", flush=True)
+            continue
         if v == "cycle":
             report(v, problem.multigrid.precondition)
             continue
