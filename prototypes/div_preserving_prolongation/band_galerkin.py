@@ -13,6 +13,8 @@ not). Flags: the coarse cells within W coarse cells of a coarse cell holding a s
 the rediscretised one.
 
     PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/band_galerkin.py RES NU SLOPES FLAGS...
+
+SLOPES "face" takes the cycle's own prolongation (kernels.FACE) instead.
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ def main(res: int, nu: float, slopes: str, flags: list[str]) -> None:
     problem = held_shell(res, nu)
     two = TwoLevel(problem)
     f, c = two.fine, two.coarse
-    P, keys = tr_prolongation(f, c, two.comp, two.pos, slopes)
+    P, keys = two.own() if slopes == "face" else tr_prolongation(f, c, two.comp, two.pos, slopes)
     surface = (P.T @ two.S @ P).tocsr()
     box = np.asarray(c.layout.box)
     held = np.zeros(tuple(box), dtype=bool)

@@ -7,9 +7,13 @@ operator A1 (three_levels.py built it from the rediscretised weights, which did 
 D1 = diag(A1), C the level's curls (``smoother_kernels.curl_taps``) on its unknowns, p the band's
 vertex patches (``patches.vertex_patches`` of the level). Chebyshev on M1^-1 A1 with the engine's
 Lanczos bound; the second coarse level P2^T A1 P2 solved exactly. The fine level keeps the engine's
-smoothing (its degree ``D0``), level 1 takes degree ``D1``.
+smoothing (its degree ``D0``), level 1 takes degree ``D1`` on [bound / S, bound] (S: the engine's
+CURL_SPREAD unless given as D0:D1:S).
 
-    PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/galerkin_levels.py RES NU D0:D1...
+    PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/galerkin_levels.py RES NU MODE D0:D1...
+
+MODE "full": level 1 is P^T A P; "cut:K": P^T A P only in the cut coarse cells and K rings around
+them, the rediscretised energy elsewhere (``band_galerkin.py``).
 """
 
 from __future__ import annotations
@@ -78,7 +82,37 @@ def band(level, keys: np.ndarray, A: sp.csr_matrix) -> sp.csr_matrix:
     return sp.csr_matrix((inv[both], (r, c)), (n, n))
 
 
-def main(res: int, nu: float, degrees: list[str]) -> None:
+def mixed(problem, m3, P1, k1, rings: int) -> sp.csr_matrix:
+    """Level 1 as ``band_galerkin.py`` mixes it: P^T A P in the cut coarse cells and ``rings`` rings
+    around them, the rediscretised energy elsewhere, the surface terms P^T S P."""
+    from band_galerkin import energy, shares
+    import scipy.ndimage as ndi
+
+    f, c = m3.levels[0], m3.levels[1]
+    comp, pos = np.nonzero(f.free)
+    keys = comp.astype(np.int64) * f.size + pos
+    sf = f.surface
+    j = np.searchsorted(keys, sf.comp.astype(np.int64) * f.size + sf.pos)
+    pick = sp.csr_matrix((np.ones(len(j)), (j, np.arange(len(j)))), (len(keys), len(j)))
+    S = (pick @ sf.matrix() @ pick.T).tocsr()
+    box = np.asarray(c.layout.box)
+    seeds = c.layout.dense(((c.vc_host > 0) & (c.vc_host < 1)).astype(np.uint8))[tuple(slice(0, n) for n in box)] > 0
+    if rings:
+        seeds = ndi.binary_dilation(seeds, np.ones((3,) * f.dim, dtype=bool), iterations=rings)
+
+    def flag(J):
+        J = np.asarray(J, dtype=np.int64)
+        ok = np.all((J >= 0) & (J < box), axis=1)
+        out = np.zeros(len(J))
+        out[ok] = seeds[tuple(J[ok].T)]
+        return out
+
+    fc, fe = shares(f, lambda I: flag((np.asarray(I, dtype=np.int64) + 2) >> 1))
+    cc, ce = shares(c, flag)
+    return (P1.T @ (energy(f, keys, fc, fe) + S) @ P1 + energy(c, k1, 1.0 - cc, 1.0 - ce)).tocsr()
+
+
+def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
     problem = held_shell(res, nu)
     m3 = mg.Multigrid(problem.level, max_levels=3)
     f, c1, c2 = m3.levels
@@ -86,7 +120,7 @@ def main(res: int, nu: float, degrees: list[str]) -> None:
     t = time.perf_counter()
     A = operator_block(f, comp.astype(np.int64) * f.size + pos)
     P1, k1 = tr_prolongation(f, c1, comp, pos)
-    A1 = (P1.T @ A @ P1).tocsr()
+    A1 = (P1.T @ A @ P1).tocsr() if mode == "full" else mixed(problem, m3, P1, k1, int(mode.split(":")[1]))
     comp1, pos1 = k1 // c1.size, k1 % c1.size
     P2, _ = tr_prolongation(c1, c2, comp1, pos1)
     F2 = Cholesky((P2.T @ A1 @ P2).tocsr())
@@ -121,8 +155,9 @@ def main(res: int, nu: float, degrees: list[str]) -> None:
     fine_degree = mg.CURL_DEGREE
 
     for pair in degrees:
-        d0, d1 = (int(v) for v in pair.split(":"))
-        coefficients = mg.chebyshev_coefficients(bound, mg.CURL_SPREAD, d1) if d1 else []
+        d0, d1, *spread = pair.split(":")
+        d0, d1, spread = int(d0), int(d1), float(spread[0]) if spread else mg.CURL_SPREAD
+        coefficients = mg.chebyshev_coefficients(bound, spread, d1) if d1 else []
 
         def smooth(b, x, first):
             step = np.zeros_like(b)
@@ -151,9 +186,9 @@ def main(res: int, nu: float, degrees: list[str]) -> None:
             its, ev = pcg_spectrum(problem, cycle)
         finally:
             mg.CURL_DEGREE = fine_degree
-        print(f"fine degree {d0}, level 1 degree {d1 or 'exact'}: {its} iterations, Ritz values {ev[0]:.3f} ... "
+        print(f"fine degree {d0}, level 1 degree {d1 or 'exact'} (spread {spread:g}): {its} iterations, Ritz values {ev[0]:.3f} ... "
               f"{ev[-1]:.3f}, condition {ev[-1] / ev[0]:.2f}", flush=True)
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]), float(sys.argv[2]), sys.argv[3:])
+    main(int(sys.argv[1]), float(sys.argv[2]), sys.argv[3], sys.argv[4:])
