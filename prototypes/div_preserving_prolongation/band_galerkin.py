@@ -10,7 +10,7 @@ coarse cells (their edges by the other share), S the fine surface terms. Both pa
 the same coarse field, so their sum is a consistent operator at the band's edge (a row-wise mix is
 not). Flags: the coarse cells within W coarse cells of a coarse cell holding a surface term's DOF
 (``hold:W``), or of any cut coarse cell too (``cut:W``); ``all`` is the whole P^T A P and ``none``
-the rediscretised one.
+the rediscretised one; ``scaleX:W`` the rediscretised energy alone, X times in the ``cut:W`` cells.
 
     PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/band_galerkin.py RES NU SLOPES FLAGS...
 
@@ -72,6 +72,9 @@ def main(res: int, nu: float, slopes: str, flags: list[str]) -> None:
     print(f"two levels with the engine's prolongation: {pcg_spectrum(problem, two.mg.precondition)[0]} iterations", flush=True)
     for flag in flags:
         kind, _, width = flag.partition(":")
+        scale = None
+        if kind.startswith("scale"):  # scaleX:W: the rediscretised energy only, X times in the flagged cells
+            scale, kind = float(kind[5:]), "cut"
         if kind in ("all", "none"):
             seeds = np.full(tuple(box), kind == "all")
         else:
@@ -85,11 +88,14 @@ def main(res: int, nu: float, slopes: str, flags: list[str]) -> None:
             out[ok] = seeds[tuple(J[ok].T)]
             return out
 
-        fc, fe = shares(f, lambda I: coarse_flag((np.asarray(I, dtype=np.int64) + 2) >> 1))
         cc, ce = shares(c, coarse_flag)
-        a_in = energy(f, two.keys, fc, fe)
-        ac_out = energy(c, keys, 1.0 - cc, 1.0 - ce)
-        Ac = (P.T @ a_in @ P + ac_out + surface).tocsr()
+        if scale is not None:
+            Ac = (energy(c, keys, 1.0 + (scale - 1.0) * cc, 1.0 + (scale - 1.0) * ce) + surface).tocsr()
+        else:
+            fc, fe = shares(f, lambda I: coarse_flag((np.asarray(I, dtype=np.int64) + 2) >> 1))
+            a_in = energy(f, two.keys, fc, fe)
+            ac_out = energy(c, keys, 1.0 - cc, 1.0 - ce)
+            Ac = (P.T @ a_in @ P + ac_out + surface).tocsr()
         its, ev = pcg_spectrum(problem, two.cycle(P, Ac))
         print(f"{flag}: {int(seeds.sum())} coarse cells flagged, {Ac.nnz / Ac.shape[0]:.1f} entries per row; {its} iterations, "
               f"Ritz values {ev[0]:.3f} ... {ev[-1]:.3f}, condition {ev[-1] / ev[0]:.2f}", flush=True)
