@@ -13,7 +13,8 @@ CURL_SPREAD unless given as D0:D1:S).
     PYTHONPATH=. .venv/bin/python prototypes/div_preserving_prolongation/galerkin_levels.py RES NU MODE D0:D1...
 
 MODE "full": level 1 is P^T A P; "cut:K": P^T A P only in the cut coarse cells and K rings around
-them, the rediscretised energy elsewhere (``band_galerkin.py``).
+them, the rediscretised energy elsewhere (``band_galerkin.py``); either with "+cutpatches": level 1's
+vertex patches around every cut cell too (``cut_band.py``).
 """
 
 from __future__ import annotations
@@ -113,6 +114,11 @@ def mixed(problem, m3, P1, k1, rings: int) -> sp.csr_matrix:
 
 
 def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
+    global vertex_patches
+    if mode.endswith("+cutpatches"):  # level 1's patches around every cut cell too (cut_band.py)
+        from cut_band import wide_patches
+
+        vertex_patches, mode = wide_patches, mode[: -len("+cutpatches")]
     problem = held_shell(res, nu)
     m3 = mg.Multigrid(problem.level, max_levels=3)
     f, c1, c2 = m3.levels
