@@ -207,13 +207,9 @@ def test_cg_below_the_f32_floor_suggests_f64():
     assert info.value.reason == "precision"
 
 
-def test_cg_far_below_the_f32_floor_suggests_only_f64():
-    """f32 vectors, A = I + 1e6 B^T B (B random 150 x 200, a near-incompressible-like penalty): b - A x
-    stays at a few percent of b, so a looser rtol is no answer (it suggested "about 1e+00" for the held
-    shell at nu 0.4999); the error asks for f64 alone and names what amplifies the rounding."""
-    from engine.solvers.cg import F32_USEFUL, SolverError
-
-    rng = np.random.default_rng(1)
+def _penalty_operator(rng):
+    """A = I + 1e6 B^T B (B random 150 x 200, a near-incompressible-like penalty) as ``jacobi_pcg``
+    reads it (A @ v and A.diagonal())."""
     B = rng.standard_normal((150, 200))
     A = np.eye(200) + 1e6 * B.T @ B
 
@@ -223,8 +219,19 @@ def test_cg_far_below_the_f32_floor_suggests_only_f64():
         def __matmul__(self, v):
             return A @ v
 
+    return Dense()
+
+
+def test_cg_far_below_the_f32_floor_suggests_only_f64():
+    """f32 vectors, A = I + 1e6 B^T B (B random 150 x 200, a near-incompressible-like penalty): b - A x
+    stays at a few percent of b, so a looser rtol is no answer (it suggested "about 1e+00" for the held
+    shell at nu 0.4999); the error asks for f64 alone and names what amplifies the rounding."""
+    from engine.solvers.cg import F32_USEFUL, SolverError
+
+    rng = np.random.default_rng(1)
+    A = _penalty_operator(rng)
     with pytest.raises(SolverError) as info:
-        jacobi_pcg(Dense(), rng.standard_normal(200), 1e-6, np.float32)
+        jacobi_pcg(A, rng.standard_normal(200), 1e-6, np.float32)
     message = str(info.value)
     measured = float(message.split("the true relative residual is ")[1].split(" ")[0])
     assert info.value.reason == "precision" and measured > F32_USEFUL
@@ -239,18 +246,10 @@ def test_cg_below_the_f64_floor_names_the_conditioning_not_the_precision():
     from engine.solvers.cg import SolverError
 
     rng = np.random.default_rng(1)
-    B = rng.standard_normal((150, 200))
-    A = np.eye(200) + 1e6 * B.T @ B
-
-    class Dense:
-        diagonal = staticmethod(lambda: np.diag(A))
-
-        def __matmul__(self, v):
-            return A @ v
-
+    A = _penalty_operator(rng)
     b = rng.standard_normal(200)
     with pytest.raises(SolverError) as info:
-        jacobi_pcg(Dense(), b, 1e-10, np.float64)
+        jacobi_pcg(A, b, 1e-10, np.float64)
     message = str(info.value)
     assert info.value.reason == "precision" and "'f64'" not in message
     assert "in double precision this is the operator's conditioning" in message and "Poisson ratio near 0.5" in message
