@@ -37,11 +37,18 @@ CHUNK = 20_000  # patches inverted per batch (bounds the [patches, 12, 12] tempo
 def vertex_patches(level: Level) -> np.ndarray | None:
     """The band's patches: DOF keys a * size + position [patches, d 2^(d-1)], -1 where the face is
     not an unknown; None when the level has no surface terms or no patch has two unknowns."""
-    sf, lay, d, size = level.surface, level.layout, level.dim, level.size
+    sf = level.surface
     if sf is None or not len(sf.pos):
         return None
+    return patches_near(level, sf.pos)
+
+
+def patches_near(level: Level, seeds: np.ndarray) -> np.ndarray | None:
+    """The patches of :func:`vertex_patches` around the flat positions ``seeds`` [k] instead of the
+    surface terms' DOFs."""
+    lay, d, size = level.layout, level.dim, level.size
     near = np.zeros(size, dtype=np.uint8)
-    near[sf.pos] = 1
+    near[seeds] = 1
     dense = lay.dense(near)
     # vertex V's patch holds the faces V - {0, 1}^d (one step back across each other axis): a
     # surface DOF within one index of one lies in V + [-2, 1] per axis

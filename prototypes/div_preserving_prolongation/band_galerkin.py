@@ -58,44 +58,60 @@ def shares(level, flag_of_cell) -> tuple[np.ndarray, np.ndarray]:
     return cells, edges
 
 
+def flagged(f, c, kind: str, rings: int) -> np.ndarray:
+    """[coarse box] bool: the coarse cells ``kind`` names ("all", "none", "hold": those holding a
+    surface term's DOF, "cut": those and every cut coarse cell) and ``rings`` rings around them."""
+    box = np.asarray(c.layout.box)
+    if kind in ("all", "none"):
+        return np.full(tuple(box), kind == "all")
+    seeds = np.zeros(tuple(box), dtype=bool)
+    seeds[tuple(((f.layout.index_of(f.surface.pos).astype(np.int64) + 2) >> 1).T)] = True
+    if kind == "cut":
+        seeds |= c.layout.dense(((c.vc_host > 0) & (c.vc_host < 1)).astype(np.uint8))[tuple(slice(0, n) for n in box)] > 0
+    if rings:
+        seeds = ndi.binary_dilation(seeds, np.ones((3,) * f.dim, dtype=bool), iterations=rings)
+    return seeds
+
+
+def flag_shares(f, c, seeds: np.ndarray):
+    """((cell, edge) weights on the fine level, the same on the coarse one) of the flagged coarse
+    cells ``seeds`` (``shares``; fine cell I lies in coarse cell (I + 2) >> 1)."""
+    box = np.asarray(seeds.shape)
+
+    def flag(J):
+        J = np.asarray(J, dtype=np.int64)
+        ok = np.all((J >= 0) & (J < box), axis=1)
+        out = np.zeros(len(J))
+        out[ok] = seeds[tuple(J[ok].T)]
+        return out
+
+    return shares(f, lambda I: flag((np.asarray(I, dtype=np.int64) + 2) >> 1)), shares(c, flag)
+
+
+def mixed_operator(f, c, fine_keys: np.ndarray, P: sp.csr_matrix, keys: np.ndarray, surface: sp.csr_matrix,
+                   seeds: np.ndarray) -> sp.csr_matrix:
+    """P^T A_in P + Ac_out + ``surface`` (P^T S P) with the coarse cells ``seeds`` flagged."""
+    (fc, fe), (cc, ce) = flag_shares(f, c, seeds)
+    return (P.T @ energy(f, fine_keys, fc, fe) @ P + energy(c, keys, 1.0 - cc, 1.0 - ce) + surface).tocsr()
+
+
 def main(res: int, nu: float, slopes: str, flags: list[str]) -> None:
     problem = held_shell(res, nu)
     two = TwoLevel(problem)
     f, c = two.fine, two.coarse
     P, keys = two.own() if slopes == "face" else tr_prolongation(f, c, two.comp, two.pos, slopes)
     surface = (P.T @ two.S @ P).tocsr()
-    box = np.asarray(c.layout.box)
-    held = np.zeros(tuple(box), dtype=bool)
-    J = (f.layout.index_of(f.surface.pos).astype(np.int64) + 2) >> 1
-    held[tuple(J.T)] = True
-    cut = c.layout.dense(((c.vc_host > 0) & (c.vc_host < 1)).astype(np.uint8))[tuple(slice(0, n) for n in box)] > 0
     print(f"two levels with the engine's prolongation: {pcg_spectrum(problem, two.mg.precondition)[0]} iterations", flush=True)
     for flag in flags:
         kind, _, width = flag.partition(":")
-        scale = None
         if kind.startswith("scale"):  # scaleX:W: the rediscretised energy only, X times in the flagged cells
-            scale, kind = float(kind[5:]), "cut"
-        if kind in ("all", "none"):
-            seeds = np.full(tuple(box), kind == "all")
-        else:
-            seeds = held | cut if kind == "cut" else held.copy()
-            seeds = ndi.binary_dilation(seeds, np.ones((3,) * f.dim, dtype=bool), iterations=int(width)) if int(width) else seeds
-
-        def coarse_flag(J):
-            J = np.asarray(J, dtype=np.int64)
-            ok = np.all((J >= 0) & (J < box), axis=1)
-            out = np.zeros(len(J))
-            out[ok] = seeds[tuple(J[ok].T)]
-            return out
-
-        cc, ce = shares(c, coarse_flag)
-        if scale is not None:
+            scale = float(kind[5:])
+            seeds = flagged(f, c, "cut", int(width))
+            _, (cc, ce) = flag_shares(f, c, seeds)
             Ac = (energy(c, keys, 1.0 + (scale - 1.0) * cc, 1.0 + (scale - 1.0) * ce) + surface).tocsr()
         else:
-            fc, fe = shares(f, lambda I: coarse_flag((np.asarray(I, dtype=np.int64) + 2) >> 1))
-            a_in = energy(f, two.keys, fc, fe)
-            ac_out = energy(c, keys, 1.0 - cc, 1.0 - ce)
-            Ac = (P.T @ a_in @ P + ac_out + surface).tocsr()
+            seeds = flagged(f, c, kind, int(width or 0))
+            Ac = mixed_operator(f, c, two.keys, P, keys, surface, seeds)
         its, ev = pcg_spectrum(problem, two.cycle(P, Ac))
         print(f"{flag}: {int(seeds.sum())} coarse cells flagged, {Ac.nnz / Ac.shape[0]:.1f} entries per row; {its} iterations, "
               f"Ritz values {ev[0]:.3f} ... {ev[-1]:.3f}, condition {ev[-1] / ev[0]:.2f}", flush=True)

@@ -7,12 +7,10 @@ surface?
 
 from __future__ import annotations
 
-import itertools
 import sys
 from pathlib import Path
 
 import numpy as np
-import scipy.ndimage as ndi
 
 from engine.staggered import patches
 
@@ -22,27 +20,13 @@ from harness import held_shell, mg, pcg_spectrum  # noqa: E402
 
 def wide_patches(level) -> np.ndarray | None:
     """``patches.vertex_patches`` with the cut cells' positions among the seeds."""
-    sf, lay, d, size = level.surface, level.layout, level.dim, level.size
-    near = np.zeros(size, dtype=np.uint8)
-    if sf is not None:
-        near[sf.pos] = 1
     vc = level.vc_host
-    near[: len(vc)][(vc > 0) & (vc < 1)] = 1
-    dense = lay.dense(near)
-    for a in range(d):
-        dense = ndi.maximum_filter1d(dense, 4, axis=a, mode="constant")
-    vertices = np.argwhere(dense > 0)
-    columns = []
-    for a in range(d):
-        for o in itertools.product(*[(0,) if k == a else (-1, 0) for k in range(d)]):
-            at = lay.positions(vertices + np.asarray(o))
-            ok = at >= 0
-            ok[ok] = level.free[a, at[ok]]
-            columns.append(np.where(ok, a * size + at, -1))
-    keys = np.stack(columns, axis=1)
-    keys = keys[(keys >= 0).sum(axis=1) >= 2]
-    print(f"  {level.layout.box}: {len(keys)} patches", flush=True)
-    return keys if len(keys) else None
+    seeds = np.nonzero((vc > 0) & (vc < 1))[0]
+    if level.surface is not None:
+        seeds = np.concatenate([seeds, level.surface.pos])
+    keys = patches.patches_near(level, seeds)
+    print(f"  {level.layout.box}: {0 if keys is None else len(keys)} patches", flush=True)
+    return keys
 
 
 def main(res: int, nu: float) -> None:

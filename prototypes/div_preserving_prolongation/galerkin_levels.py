@@ -30,7 +30,7 @@ from engine.staggered.patches import _spd_inverse, vertex_patches
 from engine.staggered.smoother_kernels import PAIRS, curl_taps
 
 sys.path.insert(0, str(Path(__file__).parent))
-from harness import Cholesky, held_shell, mg, operator_block, pcg_spectrum, ritz  # noqa: E402
+from harness import Cholesky, held_shell, host_chebyshev, lanczos_bound, mg, operator_block, pcg_spectrum  # noqa: E402
 from prolongation import tr_prolongation  # noqa: E402
 
 
@@ -83,11 +83,11 @@ def band(level, keys: np.ndarray, A: sp.csr_matrix) -> sp.csr_matrix:
     return sp.csr_matrix((inv[both], (r, c)), (n, n))
 
 
-def mixed(problem, m3, P1, k1, rings: int) -> sp.csr_matrix:
-    """Level 1 as ``band_galerkin.py`` mixes it: P^T A P in the cut coarse cells and ``rings`` rings
-    around them, the rediscretised energy elsewhere, the surface terms P^T S P."""
-    from band_galerkin import energy, shares
-    import scipy.ndimage as ndi
+def mixed(m3, P1, k1, rings: int) -> sp.csr_matrix:
+    """Level 1 as ``band_galerkin.py cut:RINGS`` mixes it: P^T A P in the coarse cells holding a
+    surface term's DOF, the cut ones and ``rings`` rings around them, the rediscretised energy
+    elsewhere, the surface terms P^T S P."""
+    from band_galerkin import flagged, mixed_operator
 
     f, c = m3.levels[0], m3.levels[1]
     comp, pos = np.nonzero(f.free)
@@ -95,22 +95,8 @@ def mixed(problem, m3, P1, k1, rings: int) -> sp.csr_matrix:
     sf = f.surface
     j = np.searchsorted(keys, sf.comp.astype(np.int64) * f.size + sf.pos)
     pick = sp.csr_matrix((np.ones(len(j)), (j, np.arange(len(j)))), (len(keys), len(j)))
-    S = (pick @ sf.matrix() @ pick.T).tocsr()
-    box = np.asarray(c.layout.box)
-    seeds = c.layout.dense(((c.vc_host > 0) & (c.vc_host < 1)).astype(np.uint8))[tuple(slice(0, n) for n in box)] > 0
-    if rings:
-        seeds = ndi.binary_dilation(seeds, np.ones((3,) * f.dim, dtype=bool), iterations=rings)
-
-    def flag(J):
-        J = np.asarray(J, dtype=np.int64)
-        ok = np.all((J >= 0) & (J < box), axis=1)
-        out = np.zeros(len(J))
-        out[ok] = seeds[tuple(J[ok].T)]
-        return out
-
-    fc, fe = shares(f, lambda I: flag((np.asarray(I, dtype=np.int64) + 2) >> 1))
-    cc, ce = shares(c, flag)
-    return (P1.T @ (energy(f, keys, fc, fe) + S) @ P1 + energy(c, k1, 1.0 - cc, 1.0 - ce)).tocsr()
+    surface = (P1.T @ (pick @ sf.matrix() @ pick.T) @ P1).tocsr()
+    return mixed_operator(f, c, keys, P1, k1, surface, flagged(f, c, "cut", rings))
 
 
 def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
@@ -126,7 +112,7 @@ def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
     t = time.perf_counter()
     A = operator_block(f, comp.astype(np.int64) * f.size + pos)
     P1, k1 = tr_prolongation(f, c1, comp, pos)
-    A1 = (P1.T @ A @ P1).tocsr() if mode == "full" else mixed(problem, m3, P1, k1, int(mode.split(":")[1]))
+    A1 = (P1.T @ A @ P1).tocsr() if mode == "full" else mixed(m3, P1, k1, int(mode.split(":")[1]))
     comp1, pos1 = k1 // c1.size, k1 % c1.size
     P2, _ = tr_prolongation(c1, c2, comp1, pos1)
     F2 = Cholesky((P2.T @ A1 @ P2).tocsr())
@@ -145,17 +131,7 @@ def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
     def minv(r: np.ndarray) -> np.ndarray:
         return dinv * r + C @ (theta_inv * (Ct @ r)) + Z @ r
 
-    r = np.random.default_rng(7).standard_normal(len(k1))
-    z = minv(r)
-    p, rz, alphas, betas = z.copy(), r @ z, [], []
-    for _ in range(mg.LANCZOS_STEPS):
-        q = A1 @ p
-        alphas.append(rz / (p @ q))
-        r = r - alphas[-1] * q
-        z = minv(r)
-        betas.append((r @ z) / rz)
-        p, rz = z + betas[-1] * p, r @ z
-    bound = ritz(alphas, betas)[-1] * mg.MARGIN
+    bound = lanczos_bound(A1, minv)
     print(f"level 1: Chebyshev bound {bound:.2f}", flush=True)
     rf = f.zeros()
     fine_degree = mg.CURL_DEGREE
@@ -166,11 +142,7 @@ def main(res: int, nu: float, mode: str, degrees: list[str]) -> None:
         coefficients = mg.chebyshev_coefficients(bound, spread, d1) if d1 else []
 
         def smooth(b, x, first):
-            step = np.zeros_like(b)
-            for i, (c_step, c_new) in enumerate(coefficients):
-                step = c_new * minv(b) if first and i == 0 else c_step * step + c_new * minv(b - A1 @ x)
-                x = x + step
-            return x
+            return host_chebyshev(A1, minv, coefficients, b, x, first)
 
         def level1(b):
             if not d1:

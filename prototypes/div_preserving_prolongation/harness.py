@@ -99,6 +99,31 @@ def ritz(alphas: list[float], betas: list[float]) -> np.ndarray:
     return np.linalg.eigvalsh(np.diag(diagonal) + np.diag(off, 1) + np.diag(off, -1))
 
 
+def lanczos_bound(A: sp.csr_matrix, minv, steps: int = mg.LANCZOS_STEPS) -> float:
+    """The Chebyshev bound as the engine takes it (``multigrid._lanczos_largest``) for a host level:
+    MARGIN times the largest Ritz value of M^-1 A after ``steps`` CG steps from a random vector."""
+    r = np.random.default_rng(7).standard_normal(A.shape[0])
+    z = minv(r)
+    p, rz, alphas, betas = z.copy(), r @ z, [], []
+    for _ in range(steps):
+        q = A @ p
+        alphas.append(rz / (p @ q))
+        r = r - alphas[-1] * q
+        z = minv(r)
+        betas.append((r @ z) / rz)
+        p, rz = z + betas[-1] * p, r @ z
+    return float(ritz(alphas, betas)[-1]) * mg.MARGIN
+
+
+def host_chebyshev(A: sp.csr_matrix, minv, coefficients, b: np.ndarray, x: np.ndarray, first: bool) -> np.ndarray:
+    """The engine's Chebyshev smoothing (``multigrid._curl_chebyshev``) of A x = b on the host."""
+    step = np.zeros_like(b)
+    for i, (c_step, c_new) in enumerate(coefficients):
+        step = c_new * minv(b) if first and i == 0 else c_step * step + c_new * minv(b - A @ x)
+        x = x + step
+    return x
+
+
 class TwoLevel:
     """The engine's two-level hierarchy of the problem, its fine operator assembled."""
 

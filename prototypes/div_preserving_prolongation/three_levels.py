@@ -18,7 +18,7 @@ from engine.staggered import galerkin, smoother_kernels
 from engine.staggered.curls import CurlSmoother
 
 sys.path.insert(0, str(Path(__file__).parent))
-from harness import Cholesky, held_shell, mg, operator_block, pcg_spectrum, ritz  # noqa: E402
+from harness import Cholesky, held_shell, host_chebyshev, lanczos_bound, mg, operator_block, pcg_spectrum  # noqa: E402
 from prolongation import tr_prolongation  # noqa: E402
 
 
@@ -60,27 +60,12 @@ def main(res: int, nu: float) -> None:
         smoother.apply(smoother_kernels.APPLY, rd, zd, zd, 0.0, 1.0)
         return zd.to_numpy()[comp1, pos1]
 
-    # the Chebyshev bound as the engine takes it: 12 CG steps' largest Ritz value of M^-1 A1
-    r = np.random.default_rng(7).standard_normal(len(k1))
-    z = minv(r)
-    p, rz, alphas, betas = z.copy(), r @ z, [], []
-    for _ in range(12):
-        q = A1 @ p
-        alphas.append(rz / (p @ q))
-        r = r - alphas[-1] * q
-        z = minv(r)
-        betas.append((r @ z) / rz)
-        p, rz = z + betas[-1] * p, r @ z
-    bound = ritz(alphas, betas)[-1] * mg.MARGIN
+    bound = lanczos_bound(A1, minv, 12)
     coefficients = mg.chebyshev_coefficients(bound, mg.CURL_SPREAD, mg.CURL_DEGREE)
     print(f"level 1: Chebyshev bound {bound:.1f}, P^T A P {A1.nnz / A1.shape[0]:.1f} entries per row", flush=True)
 
     def smooth(b: np.ndarray, x: np.ndarray, first: bool) -> np.ndarray:
-        step = np.zeros_like(b)
-        for i, (c_step, c_new) in enumerate(coefficients):
-            step = c_new * minv(b) if first and i == 0 else c_step * step + c_new * minv(b - A1 @ x)
-            x = x + step
-        return x
+        return host_chebyshev(A1, minv, coefficients, b, x, first)
 
     def level1(b: np.ndarray) -> np.ndarray:
         x = smooth(b, np.zeros_like(b), True)
