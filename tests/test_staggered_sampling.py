@@ -10,7 +10,7 @@ import trimesh
 from engine.errors import VoxelasticError
 from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
-from engine.boundary import boundary_tractions, surface_quadrature
+from engine.boundary import boundary_tractions, subdivided, surface_quadrature
 from engine.staggered.sampling import interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 
@@ -138,6 +138,41 @@ def test_triangle_rule_is_exact_to_degree_five_with_and_without_subdivision():
     area = 0.5 * np.linalg.norm(np.cross(tri[0, 1] - tri[0, 0], tri[0, 2] - tri[0, 0]))
     exact = area / 6 * ((xs**2).sum() + xs[0] * xs[1] + xs[1] * xs[2] + xs[2] * xs[0])
     assert (weights * points[:, 0] ** 2).sum() == pytest.approx(exact, rel=1e-13)
+
+
+def test_slivers_are_cut_into_pieces_linear_in_their_length_with_area_and_orientation_kept():
+    # CAD booleans' slivers, 1 m long: a needle (a hole's vertex pair to a plate's corner) and a flat
+    # cap; quartering them to edges of 1 cm made 4^7 = 16,384 pieces each (the square of length over edge)
+    needle = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.004, 0.0]]
+    cap = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.3, 0.003, 0.0]]
+    rng = np.random.default_rng(5)
+    soup = rng.normal(size=(50, 3, 3))  # and triangles of every shape, in space
+    cases = [(np.array([needle]), 0.01), (np.array([cap]), 0.01), (np.array([needle, cap]) @ _rotation(rng), 0.01),
+             (soup, 0.2)]
+    for facets, longest in cases:
+        area, normals = [np.concatenate(v) for v in zip(*(_area_normal(f) for f in facets))]
+        pieces = subdivided(facets, longest)
+        edges = np.linalg.norm(pieces - np.roll(pieces, 1, axis=1), axis=2)
+        assert edges.max() <= longest
+        if len(facets) <= 2:
+            assert len(pieces) <= len(facets) * 4 * 1.0 / longest, len(pieces)
+        points, weights, piece_normals = surface_quadrature(facets, 2 * longest)
+        assert weights.sum() == pytest.approx(area.sum(), rel=1e-12)
+        # every piece keeps its facet's outward normal: the area vectors add up facet by facet
+        np.testing.assert_allclose((weights[:, None] * piece_normals).sum(axis=0), (area[:, None] * normals).sum(axis=0),
+                                   rtol=0, atol=1e-11 * area.sum())
+        whole, w_whole, _ = surface_quadrature(facets, 100.0)  # unsplit: the degree-5 rule is exact for x^3
+        assert (weights * points[:, 0] ** 3).sum() == pytest.approx((w_whole * whole[:, 0] ** 3).sum(), rel=1e-10, abs=1e-14)
+
+
+def _rotation(rng) -> np.ndarray:
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))  # proper: orientation kept
+
+
+def _area_normal(facet: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    cross = np.cross(facet[1] - facet[0], facet[2] - facet[0])
+    return np.array([0.5 * np.linalg.norm(cross)]), (cross / np.linalg.norm(cross))[None]
 
 
 def test_segment_rule_lengths_normals_and_degree():
