@@ -24,7 +24,8 @@ import numpy as np
 from .clusters import clustered_rule
 from .errors import BoundaryError
 from .geometry.surface import Surface
-from .regions import Region, _subdivide, make_region
+from .regions import Region, make_region
+from .subdivision import split_facets, subdivided
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -365,7 +366,8 @@ def _outside(pieces: np.ndarray, source: np.ndarray, other, rim: float) -> tuple
         kept.append(pieces[take])
         kept_source.append(source[take])
         split = ~free & ~covered & ~small
-        pieces, source = _subdivide(pieces[split]), np.repeat(source[split], 2 ** (d - 1))
+        pieces, parent = split_facets(pieces[split])
+        source = source[split][parent]
     return np.concatenate(kept).reshape(-1, d, d), np.concatenate(kept_source).astype(np.int64)
 
 
@@ -401,8 +403,8 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
     as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
 
-    Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided by edge midpoints until none
-    is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
+    Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided (``subdivision.subdivided``)
+    until none is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
     degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
     ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
     of each piece). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
@@ -418,7 +420,7 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     if not (math.isfinite(spacing) and spacing > 0):
         raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
     d = facets.shape[2]
-    facets = _refine(facets, 0.5 * spacing)
+    facets = subdivided(facets, 0.5 * spacing)
     measure, normals = _measure_and_normal(facets)
     keep = measure > 0
     facets, measure, normals = facets[keep], measure[keep], normals[keep]
@@ -503,67 +505,6 @@ def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=No
     return np.array(t)
 
 
-ROUND = 0.5  # a triangle's shape quality above which _refine quarters it (a right isosceles one: 0.87)
-
-
-def _refine(facets: np.ndarray, longest: float) -> np.ndarray:
-    """Subdivide facets [M, d, d] until every edge is at most ``longest`` [m], in pieces linear in a
-    sliver's length. A well-shaped triangle (quality 4 sqrt(3) area / sum of squared edges above
-    ROUND; 1 when equilateral) is quartered by its edge midpoints; a needle (its shortest edge at
-    most ``longest``) is cut into a strip of slices parallel to that edge (``_strips``); any other
-    sliver (a flat cap) is split at the foot of the altitude on its longest edge, into two needles.
-    Quartering every triangle made a sliver of length L into (L / longest)^2 pieces: the 256 fan
-    slivers of a holed plate's face (L ~ 0.7 m, longest 12.5 mm) 948 k pieces, 6.6 M quadrature
-    points and 36 s of a 40 x 40 x 8 cell job's setup."""
-    done = []
-    while len(facets):
-        edges = np.linalg.norm(np.roll(facets, -1, axis=1) - facets, axis=2)  # edge k: vertex k to k + 1
-        long = edges.max(axis=1) > longest
-        done.append(facets[~long])
-        facets, edges = facets[long], edges[long]
-        if facets.shape[-1] == 2:
-            facets = _subdivide(facets)
-            continue
-        area = 0.5 * np.linalg.norm(np.cross(facets[:, 1] - facets[:, 0], facets[:, 2] - facets[:, 0]), axis=1)
-        quarter = 4 * np.sqrt(3) * area > ROUND * (edges**2).sum(axis=1)
-        needle = ~quarter & (edges.min(axis=1) <= longest)
-        cap = ~quarter & ~needle
-        # vertices rolled cyclically (the orientation kept): the needle's apex first, opposite its
-        # shortest edge; the cap's longest edge from its first vertex to its second
-        apex, b, c = _rolled(facets[needle], edges[needle].argmin(axis=1) + 2)
-        p, q, r = _rolled(facets[cap], edges[cap].argmax(axis=1))
-        t = np.einsum("ij,ij->i", r - p, q - p) / np.einsum("ij,ij->i", q - p, q - p)
-        foot = p + t[:, None] * (q - p)
-        halves = np.stack([np.stack([p, foot, r], axis=1), np.stack([foot, q, r], axis=1)], axis=1).reshape(-1, 3, 3)
-        facets = np.concatenate([_subdivide(facets[quarter]), _strips(apex, b, c, longest), halves])
-    return np.concatenate(done) if done else facets
-
-
-def _rolled(facets: np.ndarray, first: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The vertices [K, 3] of triangles [K, 3, 3] from vertex ``first`` [K] on, in their own cyclic order."""
-    rows = np.arange(len(facets))
-    return tuple(facets[rows, (first + s) % 3] for s in range(3))
-
-
-def _strips(apex: np.ndarray, b: np.ndarray, c: np.ndarray, longest: float) -> np.ndarray:
-    """Triangles (apex, b, c) [K, 3] each whose edge bc is at most ``longest``, cut by n lines parallel to
-    bc into 2 n - 1 triangles [sum(2 n - 1), 3, 3] (orientation kept) whose edges along ab and ac
-    are at most longest - |bc| (at most longest / 2 when |bc| > longest / 2), so that their diagonals
-    are at most ``longest`` (1.5 ``longest``)."""
-    side = np.maximum(np.linalg.norm(b - apex, axis=1), np.linalg.norm(c - apex, axis=1))
-    step = np.maximum(longest - np.linalg.norm(c - b, axis=1), 0.5 * longest)
-    n = np.maximum(np.ceil(side / step), 1).astype(np.int64)
-    count = 2 * n - 1
-    owner = np.repeat(np.arange(len(n)), count)
-    j = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    i = (j + 1) // 2  # slice i holds (P_i, P_i+1, Q_i+1) at odd j (and j = 0) and (P_i, Q_i+1, Q_i) at even j > 0
-    t0, t1 = (i / n[owner])[:, None], ((i + 1) / n[owner])[:, None]
-    a0, ab, ac = apex[owner], b[owner] - apex[owner], c[owner] - apex[owner]
-    p0, p1, q0, q1 = a0 + t0 * ab, a0 + t1 * ab, a0 + t0 * ac, a0 + t1 * ac
-    outer = ((j % 2) == 1) | (j == 0)
-    return np.stack([p0, np.where(outer[:, None], p1, q1), np.where(outer[:, None], q1, q0)], axis=1)
-
-
 def facet_measures(facets: np.ndarray) -> np.ndarray:
     """Area [m^2] (3D triangles) or length [m] (2D segments) [M] of simplices [M, d, d]."""
     return _measure_and_normal(np.asarray(facets, dtype=float))[0]
@@ -573,11 +514,6 @@ def area_vectors(facets: np.ndarray) -> np.ndarray:
     """Area [m^2] (3D) or length [m] (2D) times the unit outward normal [M, d] of simplices [M, d, d]."""
     measure, normals = _measure_and_normal(np.asarray(facets, dtype=float))
     return measure[:, None] * normals
-
-
-def subdivided(facets: np.ndarray, longest: float) -> np.ndarray:
-    """Facets [M, d, d] cut by edge midpoints into pieces [K, d, d] whose edges are at most ``longest`` [m]."""
-    return _refine(np.asarray(facets, dtype=float).reshape(-1, facets.shape[-1], facets.shape[-1]), longest)
 
 
 def _measure_and_normal(facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import VoxelasticError
+from .subdivision import split_facets
 
 
 ROUNDOFF = 1e-10  # relative: slicing round-off is ~1e-14, real geometry (>= 1e-6 of a cell) is far above
@@ -118,7 +119,8 @@ class Ball:
             pieces.append(todo[take])
             owner.append(source[take])
             split = ~inside & ~outside & ~small
-            todo, source = _subdivide(todo[split]), np.repeat(source[split], 2 ** (todo.shape[-1] - 1))
+            todo, parent = split_facets(todo[split])
+            source = source[split][parent]
         d = facets.shape[-1]
         return np.concatenate(pieces).reshape(-1, d, d), np.concatenate(owner).astype(np.int64)
 
@@ -174,16 +176,3 @@ def _clip_segment(p: np.ndarray, normal: np.ndarray, offset: float, tolerance: f
         return None
     cut = p[0] + (p[1] - p[0]) * (sa / (sa - sb))
     return np.array([p[0], cut]) if sa <= 0 else np.array([cut, p[1]])
-
-
-def _subdivide(facets: np.ndarray) -> np.ndarray:
-    """Halve segments [n, 2, 2] / quarter triangles [n, 3, 3] by edge midpoints, keeping orientation."""
-    if facets.shape[-1] == 2:
-        a, b = facets[:, 0], facets[:, 1]
-        m = 0.5 * (a + b)
-        return np.stack([np.stack([a, m], 1), np.stack([m, b], 1)], axis=1).reshape(-1, 2, 2)
-    a, b, c = facets[:, 0], facets[:, 1], facets[:, 2]
-    ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
-    return np.stack(
-        [np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], axis=1
-    ).reshape(-1, 3, 3)

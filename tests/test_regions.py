@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from engine.errors import VoxelasticError
-from engine.boundary import select_patch
+from engine.boundary import facet_measures, select_patch
 from engine.regions import Ball, make_region
 from schemas import parse_job
 
@@ -108,3 +108,16 @@ def test_empty_selection_names_the_boundary_and_the_gap():
         select_patch(region, square, "boundaries.1 (tip_load)")
     pieces, _ = select_patch(make_region(type("R", (), {"box": [[0.5, -1.0], [3.0, 2.0]]})(), 2), square, "b")
     assert abs(np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum() - 1.5) < 1e-15
+
+
+def test_a_ball_clips_a_sliver_in_few_pieces_and_keeps_its_area():
+    # a needle 1 m x 4 mm crossed twice by a ball's surface: quartering the straddling pieces down to
+    # the ball's tolerance (radius / 1000) made 13,104 pieces, more than that tolerance fits along the
+    # needle (5,000); inside is x in [0.3, 0.7], area 0.002 (0.7^2 - 0.3^2)
+    needle = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.004, 0.0]]])
+    pieces, source = Ball(np.array([0.5, 0.0, 0.0]), 0.2).clip(needle)
+    assert len(pieces) < 1.0 / (0.2 / 1000), len(pieces)
+    assert np.all(source == 0)
+    assert facet_measures(pieces).sum() == pytest.approx(0.002 * (0.7**2 - 0.3**2), rel=1e-3)
+    normals = np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0])
+    assert np.all(normals[:, 2] > 0)  # every piece keeps the needle's orientation

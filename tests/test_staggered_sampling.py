@@ -10,7 +10,8 @@ import trimesh
 from engine.errors import VoxelasticError
 from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
-from engine.boundary import boundary_tractions, subdivided, surface_quadrature
+from engine.boundary import boundary_tractions, surface_quadrature
+from engine.subdivision import subdivided
 from engine.staggered.sampling import interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 

@@ -15,10 +15,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..boundary import area_vectors, subdivided
+from ..boundary import area_vectors
 from ..geometry.surface import Surface
 from ..geometry.topology import shells
 from ..grid import Grid
+from ..subdivision import subdivided
 from .operator import Level
 
 MAX_BODIES = 500  # beyond this many separate solids (a scan's specks) the check is skipped

@@ -19,9 +19,10 @@ import itertools
 
 import numpy as np
 
-from ..boundary import SurfaceLoad, facet_measures, select_patch, subdivided, surface_quadrature
+from ..boundary import SurfaceLoad, facet_measures, select_patch, surface_quadrature
 from ..geometry.surface import Surface
 from ..grid import Grid
+from ..subdivision import subdivided
 from . import sampling
 from .layout import TileLayout
 
