@@ -157,6 +157,10 @@ def test_slivers_are_cut_into_pieces_linear_in_their_length_with_area_and_orient
         assert edges.max() <= longest
         if len(facets) <= 2:
             assert len(pieces) <= len(facets) * 4 * 1.0 / longest, len(pieces)
+        if len(facets) == 1:  # every piece faces as its facet does
+            cross = np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0])
+            np.testing.assert_allclose(cross / np.linalg.norm(cross, axis=1)[:, None],
+                                       np.broadcast_to(normals[0], cross.shape), atol=1e-9)
         points, weights, piece_normals = surface_quadrature(facets, 2 * longest)
         assert weights.sum() == pytest.approx(area.sum(), rel=1e-12)
         # every piece keeps its facet's outward normal: the area vectors add up facet by facet
