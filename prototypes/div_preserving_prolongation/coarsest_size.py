@@ -17,7 +17,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import trimesh
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -34,23 +33,8 @@ def spec(case: str, res: int, tmp: Path) -> tuple[dict, str]:
     if case == "shell":
         shell_mesh(tmp / "shell.stl")
         return job(str(tmp / "shell.stl"), res, 0.3, 1e-6, "cpu"), str(tmp / "shell.stl")
-    if case in ("cantilever", "dynamic"):
-        clamp = {"kind": "displacement", "name": "clamp", "region": {"box": [[-0.1, -0.2, -0.2], [0.05, 0.2, 0.2]]}, "value": [0, 0, 0]}
-        tip = {"kind": "traction", "name": "tip", "region": {"box": [[1.0, -0.2, -0.2], [1.1, 0.2, 0.2]]}, "value": [0, 0, -1000]}
-        analysis = {"kind": "dynamic", "time_step": 1e-3, "steps": 3} if case == "dynamic" else None
-        return hb.spec(hb.CANTILEVER, res, [clamp, tip], analysis), hb.CANTILEVER
-    if case == "torus":
-        trimesh.creation.torus(1.0, 0.3).export(tmp / "torus.stl")
-        end = {"kind": "displacement", "name": "end", "region": {"box": [[-2, -2, -2], [-0.9, 2, 2]]}, "value": [0, 0, 0]}
-        push = {"kind": "pressure", "name": "push", "region": {"box": [[0.9, -2, -2], [2, 2, 2]]}, "value": 1e4}
-        return hb.spec(str(tmp / "torus.stl"), res, [end, push]), str(tmp / "torus.stl")
-    if case == "bar":
-        bar = trimesh.creation.box([1.0, 0.2, 0.2])
-        bar.apply_translation([0.5, 0, 0])
-        bar.apply_transform(trimesh.transformations.rotation_matrix(np.radians(17), [0.3, 1, 0.2]))
-        bar.export(tmp / "tilted.stl")
-        held = {"kind": "displacement", "name": "end", "region": {"sphere": {"center": [0, 0, 0], "radius": 0.16}}, "value": [0, 0, 0]}
-        return hb.spec(str(tmp / "tilted.stl"), res, [held]), str(tmp / "tilted.stl")
+    if case in ("cantilever", "dynamic", "torus", "bar"):
+        return hb.body(case, res, tmp)
     if case == "ball":
         trimesh.creation.icosphere(4, radius=1.0).export(tmp / "ball.stl")
         below = {"kind": "pressure", "name": "below", "region": {"box": [[-2, -2, -2], [2, 2, 0]]}, "value": 1e4}

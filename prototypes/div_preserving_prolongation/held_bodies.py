@@ -37,22 +37,36 @@ def solve(name: str, job_spec: dict, mesh: str, nus: tuple[float, ...] = (0.3, 0
         print(f"{name:34s} nu {nu}: {r.solver.iterations} iterations, {time.perf_counter() - t:.1f} s", flush=True)
 
 
+def body(name: str, resolution: int, tmp: Path) -> tuple[dict, str]:
+    """(the job spec at nu 0.3, its mesh path) of a held body: ``cantilever`` (the bundled one, clamped
+    and loaded at its tip), ``dynamic`` (the same, 3 backward-Euler steps of 1 ms), ``bar`` (a 1 x 0.2 x
+    0.2 bar tilted 17 degrees about an oblique axis, held within 0.16 m of its end face's centre: a cut
+    clamp) or ``torus`` (radii 1, 0.3, held on its -x end, pressed on its +x end); meshes written to ``tmp``."""
+    if name in ("cantilever", "dynamic"):
+        clamp = {"kind": "displacement", "name": "clamp", "region": {"box": [[-0.1, -0.2, -0.2], [0.05, 0.2, 0.2]]}, "value": [0, 0, 0]}
+        tip = {"kind": "traction", "name": "tip", "region": {"box": [[1.0, -0.2, -0.2], [1.1, 0.2, 0.2]]}, "value": [0, 0, -1000]}
+        analysis = {"kind": "dynamic", "time_step": 1e-3, "steps": 3} if name == "dynamic" else None
+        return spec(CANTILEVER, resolution, [clamp, tip], analysis), CANTILEVER
+    if name == "bar":
+        bar = trimesh.creation.box([1.0, 0.2, 0.2])
+        bar.apply_translation([0.5, 0, 0])  # its end face centred on the origin, then tilted about an oblique axis
+        bar.apply_transform(trimesh.transformations.rotation_matrix(np.radians(17), [0.3, 1, 0.2]))
+        bar.export(tmp / "tilted.stl")
+        held = {"kind": "displacement", "name": "end", "region": {"sphere": {"center": [0, 0, 0], "radius": 0.16}}, "value": [0, 0, 0]}
+        return spec(str(tmp / "tilted.stl"), resolution, [held]), str(tmp / "tilted.stl")
+    if name == "torus":
+        trimesh.creation.torus(1.0, 0.3).export(tmp / "torus.stl")
+        end = {"kind": "displacement", "name": "end", "region": {"box": [[-2, -2, -2], [-0.9, 2, 2]]}, "value": [0, 0, 0]}
+        push = {"kind": "pressure", "name": "push", "region": {"box": [[0.9, -2, -2], [2, 2, 2]]}, "value": 1e4}
+        return spec(str(tmp / "torus.stl"), resolution, [end, push]), str(tmp / "torus.stl")
+    raise ValueError(f"unknown body {name!r}")
+
+
 def main() -> None:
     tmp = Path(tempfile.mkdtemp())
-    clamp = {"kind": "displacement", "name": "clamp", "region": {"box": [[-0.1, -0.2, -0.2], [0.05, 0.2, 0.2]]}, "value": [0, 0, 0]}
-    tip = {"kind": "traction", "name": "tip", "region": {"box": [[1.0, -0.2, -0.2], [1.1, 0.2, 0.2]]}, "value": [0, 0, -1000]}
-    solve("bundled cantilever, 48", spec(CANTILEVER, 48, [clamp, tip]), CANTILEVER)
-    solve("cantilever, backward Euler, 32", spec(CANTILEVER, 32, [clamp, tip], {"kind": "dynamic", "time_step": 1e-3, "steps": 3}), CANTILEVER)
-    bar = trimesh.creation.box([1.0, 0.2, 0.2])
-    bar.apply_translation([0.5, 0, 0])  # its end face centred on the origin, then tilted about an oblique axis
-    bar.apply_transform(trimesh.transformations.rotation_matrix(np.radians(17), [0.3, 1, 0.2]))
-    bar.export(tmp / "tilted.stl")
-    held = {"kind": "displacement", "name": "end", "region": {"sphere": {"center": [0, 0, 0], "radius": 0.16}}, "value": [0, 0, 0]}
-    solve("tilted bar, cut clamp, 40", spec(str(tmp / "tilted.stl"), 40, [held]), str(tmp / "tilted.stl"))
-    trimesh.creation.torus(1.0, 0.3).export(tmp / "torus.stl")
-    end = {"kind": "displacement", "name": "end", "region": {"box": [[-2, -2, -2], [-0.9, 2, 2]]}, "value": [0, 0, 0]}
-    push = {"kind": "pressure", "name": "push", "region": {"box": [[0.9, -2, -2], [2, 2, 2]]}, "value": 1e4}
-    solve("torus, clamp and pressure, 48", spec(str(tmp / "torus.stl"), 48, [end, push]), str(tmp / "torus.stl"))
+    for title, name, resolution in (("bundled cantilever, 48", "cantilever", 48), ("cantilever, backward Euler, 32", "dynamic", 32),
+                                    ("tilted bar, cut clamp, 40", "bar", 40), ("torus, clamp and pressure, 48", "torus", 48)):
+        solve(title, *body(name, resolution, tmp))
     shell = tmp / "shell.stl"
     shell_mesh(shell)
     s = job(str(shell), 40, 0.3, 1e-6, "cpu")
