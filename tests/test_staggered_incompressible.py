@@ -59,8 +59,8 @@ def test_free_thick_sphere_iterations_and_error_do_not_grow_with_nu():
 # ----------------------------------------------------------------------------- the curl smoother
 
 
-def held_body(d: int) -> StaggeredElasticity:
-    """A disc (2D) or ball (3D) of radius 1 held on its surface below x_d = -0.6, nu = 0.4999."""
+def held_body(d: int, nu: float = 0.4999) -> StaggeredElasticity:
+    """A disc (2D) or ball (3D) of radius 1 held on its surface below x_d = -0.6, Poisson's ratio ``nu``."""
     if d == 2:
         t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
         surface = polygon_surface_2d(np.stack([np.cos(t), np.sin(t)], axis=1))
@@ -72,7 +72,7 @@ def held_body(d: int) -> StaggeredElasticity:
         grid = make_grid(*surface.bounds, resolution=8)
     hold = Prescribed(Halfspaces(np.eye(d)[[d - 1]], np.array([-0.6])), (0.0,) * d, "base")
     return StaggeredElasticity(fractions=volume_fractions(surface, grid), surface=surface,
-                               material=Material(1.0, 0.4999, 1.0), prescribed=[hold])
+                               material=Material(1.0, nu, 1.0), prescribed=[hold])
 
 
 def assembled(level) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
@@ -82,7 +82,9 @@ def assembled(level) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     gid = assembly.dof_index(comp, lay.indices()[pos], tuple(n - 1 for n in lay.box))
     edges = {p: lay.dense(level.ve_host[q]) for q, p in enumerate(axis_pairs(d))}
     K = assembly.stiffness(lay.dense(level.vc_host), edges, level.spacing, level.lam, level.mu).tocsr()
-    A = K[gid][:, gid] + sp.diags(level.shift * level.mass.to_numpy()[comp, pos])
+    A = K[gid][:, gid]
+    if level.mass is not None:
+        A = A + sp.diags(level.shift * level.mass.to_numpy()[comp, pos])
     return (A + _on_free(level.surface, level.surface.matrix(), comp, pos, level.size)).tocsr(), comp, pos
 
 

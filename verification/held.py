@@ -52,17 +52,12 @@ def clamped_sphere_error(nu: float, h: float, method: dict | None = None) -> tup
     """Thick sphere a = 0.5, b = 1 (E = 1), pressure 1 inside, the outer surface held (u = 0 on the
     surface where |x| > 0.98): u = (A r + B / r^2) e_r, A = -B, B = 1 / ((3 lambda + 2 mu) + 4 mu / a^3).
     Relative L2 error at 500 probes in 0.55 < r < 0.95 at cell size ``h``, and the job's warnings."""
-    from engine import simulate
-    from engine.pipeline import Functions
-
     lam, mu = lame(nu)
     B = 1.0 / ((3 * lam + 2 * mu) + 4 * mu / A_IN**3)
     probes = sphere_probes(3, 500)
     rp = np.linalg.norm(probes, axis=1)
     exact = ((-B * rp + B / rp**2) / rp)[:, None] * probes
-    spec = _job(3, h, nu, method, probes, {"mesh": "s.stl"})
-    fn = Functions(regions={"clamp": lambda p: np.linalg.norm(p, axis=1) > CLAMP_RADIUS})
-    result = simulate(spec, shell_stl(), filename="s.stl", functions=fn)
+    result = held_sphere(nu, h, method)
     return _error(result.fields.probes["displacement"], exact), result.solver.warnings
 
 
@@ -89,13 +84,21 @@ def partly_clamped_sphere(nu: float, h: float, method: dict | None = None, below
                           subdivisions: int = 5) -> tuple[np.ndarray, list[str]]:
     """The sphere of :func:`clamped_sphere_error` clamped only where z < ``below`` [m] (the patch has a
     rim): the displacement [500, 3] [m] at its probes and the job's warnings."""
+    result = held_sphere(nu, h, method, below, subdivisions)
+    return result.fields.probes["displacement"], result.solver.warnings
+
+
+def held_sphere(nu: float, h: float, method: dict | None = None, below: float = np.inf, subdivisions: int = 5,
+                rtol: float = 1e-10):
+    """The engine's result for the thick sphere of :func:`clamped_sphere_error` clamped where |x| >
+    CLAMP_RADIUS and z < ``below`` [m], at cell size ``h`` [m], probes at its 500 points."""
     from engine import simulate
     from engine.pipeline import Functions
 
     spec = _job(3, h, nu, method, sphere_probes(3, 500), {"mesh": "s.stl"})
+    spec["solver"]["rtol"] = rtol
     fn = Functions(regions={"clamp": lambda p: (np.linalg.norm(p, axis=1) > CLAMP_RADIUS) & (p[:, 2] < below)})
-    result = simulate(spec, shell_stl(subdivisions), filename="s.stl", functions=fn)
-    return result.fields.probes["displacement"], result.solver.warnings
+    return simulate(spec, shell_stl(subdivisions), filename="s.stl", functions=fn)
 
 
 def difference(u: np.ndarray, reference: np.ndarray) -> float:

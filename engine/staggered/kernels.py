@@ -138,7 +138,7 @@ def weighted_stresses(d: ti.template(), listed: ti.template(), pos: ti.types.nda
 
 
 # What stress_divergence does with A x at a face (compile-time modes).
-APPLY, RESIDUAL, CHEBYSHEV, PRECONDITIONED = 0, 1, 2, 3
+APPLY, RESIDUAL, CHEBYSHEV = 0, 1, 2
 
 
 @ti.kernel(fastcache=True)
@@ -150,9 +150,8 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
     """A x = mask (h^{d-1} div(weighted stresses) + shift m x), the operator K (+ shift M), at the
     faces of the n positions of a part (whose stresses and their neighbours' must be current).
     ``mode``: APPLY y = A x; RESIDUAL y = b - A x; CHEBYSHEV step = c1 step + c2 dinv (b - A x),
-    x += step (one step of the Chebyshev recurrence; c1 = 0 never reads step); PRECONDITIONED
-    y = c2 dinv A x (a power-iteration step; y may be x). Fusing these into the divergence saves
-    writing and re-reading A x, and x is only read at the face itself (the stresses were computed
+    x += step (one step of the Chebyshev recurrence; c1 = 0 never reads step). Fusing these into the
+    divergence saves writing and re-reading A x, and x is only read at the face itself (the stresses were computed
     before), so updating it in place is safe. Arrays a mode does not use may be any array of the
     right rank. The surface terms' S x, on their few DOFs, comes after: :func:`surface_add`."""
     for i in range(n):
@@ -175,8 +174,6 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
                 y[a, p] = stored(y, mask[a, p] * scale * f)
             elif ti.static(mode == RESIDUAL):
                 y[a, p] = stored(y, b[a, p] - mask[a, p] * scale * f)
-            elif ti.static(mode == PRECONDITIONED):
-                y[a, p] = stored(y, c2 * dinv[a, p] * scale * f)
             else:
                 # dinv vanishes off the unknowns, so the mask is not needed: step stays 0 there
                 s = c2 * dinv[a, p] * (b[a, p] - scale * f)
@@ -437,7 +434,7 @@ def chebyshev_start(d: ti.template(), x: ti.types.ndarray(), step: ti.types.ndar
 @ti.kernel(fastcache=True)
 def random_fill(d: ti.template(), x: ti.types.ndarray(), m: ti.types.ndarray(), seed: ti.u32):
     """x = m * (a hash of (component, position, seed) in [0, 1)): a reproducible random vector made
-    where it lives (the power iteration's start), independent of threads and of the backend."""
+    where it lives (the smoothing bound's Lanczos start), independent of threads and of the backend."""
     for p in range(x.shape[1]):
         for a in ti.static(range(d)):
             k = ti.cast(p, ti.u32) * ti.u32(d) + ti.u32(a) + seed * ti.u32(0x9E3779B9)
@@ -545,8 +542,7 @@ def surface_add(mode: ti.template(), slots: ti.types.ndarray(), n: ti.i32, comp:
                 c2: float, step: ti.types.ndarray(), x: ti.types.ndarray(), y: ti.types.ndarray()):
     """What S x (``sx`` [k], at the surface DOFs comp[k], pos[k]) adds to A x in each mode of
     :func:`stress_divergence`, after it, at the surface DOFs ``slots[:n]`` (those of the part it
-    ran over): APPLY y += mask sx, RESIDUAL y -= mask sx, PRECONDITIONED y += c2 dinv sx, CHEBYSHEV
-    step and x -= c2 dinv sx. A pass over the few surface DOFs instead of a full [d, size] array of
+    ran over): APPLY y += mask sx, RESIDUAL y -= mask sx, CHEBYSHEV step and x -= c2 dinv sx. A pass over the few surface DOFs instead of a full [d, size] array of
     S x read by the divergence (10 bytes per unknown on the 256^3 shell); each DOF once: no races."""
     for i in range(n):
         k = slots[i]
@@ -556,8 +552,6 @@ def surface_add(mode: ti.template(), slots: ti.types.ndarray(), n: ti.i32, comp:
             y[a, p] = stored(y, y[a, p] + mask[a, p] * v)
         elif ti.static(mode == RESIDUAL):
             y[a, p] = stored(y, y[a, p] - mask[a, p] * v)
-        elif ti.static(mode == PRECONDITIONED):
-            y[a, p] = stored(y, y[a, p] + c2 * dinv[a, p] * v)
         else:
             dv = c2 * dinv[a, p] * v
             step[a, p] = stored(step, step[a, p] - dv)

@@ -24,6 +24,8 @@ them is smoothed by exact vertex-patch solves as well (``patches.py``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
@@ -51,11 +53,12 @@ MAX_CUT_SHARE = 0.85
 DEGREE = 3  # Chebyshev smoothing steps before and after the coarse correction
 # The smoother targets the eigenvalues of D^-1 A in [UPPER / SPREAD, UPPER] with UPPER a
 # safety margin above the estimated largest one; damped Jacobi (one fixed weight) stalls here
-# because the largest eigenvalue (~3.9 in 3D) leaves only a small weight for the rest.
-SPREAD = 6.0
+# because the largest eigenvalue (~3.9 in 3D) leaves only a small weight for the rest. SPREAD 6
+# was tuned with power iteration's low bound; with Lanczos' 8 keeps the counts (held bodies at nu
+# 0.3: docs/design-notes.md, "The point smoothing's bound").
+SPREAD = 8.0
 MARGIN = 1.1
-POWER_STEPS = 12
-LANCZOS_STEPS = 12  # CG steps of the curl path's estimate (``_lanczos_largest``)
+LANCZOS_STEPS = 12  # CG steps of the smoothing bound's estimate (``_lanczos_largest``)
 # Boundary smoothing: BAND_DEGREE more Chebyshev steps on [UPPER / BAND_SPREAD, UPPER], only on
 # the free DOFs within one cell of a cut cell or a prescribed DOF. Near the surface the averaged
 # coarse fractions misjudge the energy of interpolated errors: on the 64^3 sphere the stationary
@@ -158,11 +161,11 @@ class Multigrid:
         self.coarse = CoarseSolver(self.levels[-1], "coarsest multigrid level" if len(self.levels) > 1 else "problem")
         if self.robust:
             self.curls = [CurlSmoother(lv) for lv in self.levels[:-1]]
-            self.bounds = [_lanczos_largest(lv, sm) * MARGIN for lv, sm in zip(self.levels, self.curls)]
+            self.bounds = [_lanczos_largest(lv, _curl_inverse(sm)) * MARGIN for lv, sm in zip(self.levels, self.curls)]
             self.bands = [None] * (len(self.levels) - 1)
         else:
             self.curls = None
-            self.bounds = [_largest_eigenvalue(lv, self.work[k][0]) * MARGIN for k, lv in enumerate(self.levels[:-1])]
+            self.bounds = [_lanczos_largest(lv, _jacobi(lv)) * MARGIN for lv in self.levels[:-1]]
             self.bands = [boundary_band(lv) for lv in self.levels[:-1]]
 
     def precondition(self, r, z) -> None:
@@ -240,16 +243,28 @@ def chebyshev_coefficients(upper: float, spread: float, degree: int) -> list[tup
     return out
 
 
-def _lanczos_largest(level: Level, smoother: CurlSmoother, steps: int = LANCZOS_STEPS) -> float:
-    """The largest Ritz value of M^-1 A (M^-1: the curl smoother) on the free DOFs after ``steps``
-    steps of preconditioned CG from a random right-hand side (the Lanczos coefficients CG yields).
-    Power iteration converged too slowly once the band's patch solves joined M^-1: at 64^3 and nu
-    0.45 its 12 steps gave 12.5 where 200 gave 15.3, and the Chebyshev smoothing above the estimate
-    amplified errors (371 CG iterations; 10 with the 200-step bound)."""
+def _curl_inverse(smoother: CurlSmoother) -> Callable:
+    """z = M^-1 r with M^-1 the curl smoother (the curl path's ``inverse`` for :func:`_lanczos_largest`)."""
+    return lambda r, z: smoother.apply(smoother_kernels.APPLY, r, z, z, 0.0, 1.0)
+
+
+def _jacobi(level: Level) -> Callable:
+    """z = D^-1 r on the free DOFs (the point smoothing's ``inverse`` for :func:`_lanczos_largest`)."""
+    return lambda r, z: kernels.chebyshev_start(level.dim, z, z, level.dinv, r, 1.0)
+
+
+def _lanczos_largest(level: Level, inverse: Callable, steps: int = LANCZOS_STEPS) -> float:
+    """The largest Ritz value of M^-1 A on the free DOFs (``inverse(r, z)``: z = M^-1 r) after
+    ``steps`` steps of preconditioned CG from a random right-hand side (the Lanczos coefficients CG
+    yields): the Chebyshev smoothing's upper bound, from below. Power iteration converges too slowly
+    where the surface terms or the band's patch solves make the top of the spectrum local: on the
+    curl path (64^3 held shell, nu 0.45) its 12 steps gave 12.5 where 200 gave 15.3, and the
+    smoothing amplified what lay above (371 CG iterations; 10 with the 200-step bound); on the point
+    path (the sphere clamped on its outer surface, nu 0.3, h = 0.05) 53 CG iterations against 13."""
     r, z, p, q = (level.zeros() for _ in range(4))  # setup only: freed on return
     d = level.dim
     kernels.random_fill(d, r, level.mask, 7)
-    smoother.apply(smoother_kernels.APPLY, r, z, z, 0.0, 1.0)
+    inverse(r, z)
     kernels.copy(d, z, p)
     rz = kernels.dot(d, r, z)
     alphas, betas = [], []
@@ -260,7 +275,7 @@ def _lanczos_largest(level: Level, smoother: CurlSmoother, steps: int = LANCZOS_
             break
         alpha = rz / pq
         kernels.axpy(d, -alpha, q, r)
-        smoother.apply(smoother_kernels.APPLY, r, z, z, 0.0, 1.0)
+        inverse(r, z)
         rz_next = kernels.dot(d, r, z)
         beta = rz_next / rz
         alphas.append(alpha)
@@ -302,22 +317,6 @@ def cut_share(level: Level) -> float:
     vc = level.vc_host
     solid = np.count_nonzero(vc > 0)
     return np.count_nonzero((vc > 0) & (vc < 1)) / solid if solid else 1.0
-
-
-def _largest_eigenvalue(level: Level, v) -> float:
-    """Power iteration estimate of the largest eigenvalue of D^-1 A on the free DOFs (``v``: a work
-    array of the level). Not converged (the 128^3 shell's levels: 3.58 after 12 steps, 3.75 after
-    40): MARGIN times this estimate is the point smoothers' upper bound as tuned (the curl path's
-    comes from :func:`_lanczos_largest`)."""
-    kernels.random_fill(level.dim, v, level.mask, 7)
-    estimate = 1.0
-    norm = np.sqrt(kernels.dot(level.dim, v, v))
-    for _ in range(POWER_STEPS):
-        if norm == 0.0:
-            return 1.0
-        level.preconditioned(v, v, 1.0 / norm)  # D^-1 vanishes off the free DOFs
-        norm = estimate = np.sqrt(kernels.dot(level.dim, v, v))
-    return float(estimate)
 
 
 class CoarseSolver:

@@ -205,7 +205,7 @@ class Level:
         surface = self.surface is not None
         c1, c2 = float(c1), float(c2)  # numpy scalars would defeat the kernel launcher's argument cache
         if surface:
-            self._surface_apply(x)  # before the divergence: PRECONDITIONED may overwrite x
+            self._surface_apply(x)  # before the divergence: CHEBYSHEV updates x in place
         kernels.stress_divergence(d, mode, listed, part.update if listed else self._unlisted,
                                   part.m if listed else self.layout.count * self.layout.tile_size,
                                   self.nbr, self.mask, self.sc, self.se, self.spacing ** (d - 1), x,
@@ -231,11 +231,6 @@ class Level:
         dinv must vanish off the free DOFs. c1 = 0 does not read step."""
         self._stresses(x, part)
         self._divergence(kernels.CHEBYSHEV, part, x, b, dinv, step, c1, c2, step)
-
-    def preconditioned(self, x, y, c: float) -> None:
-        """y = c D^-1 A x (y may be x)."""
-        self._stresses(x, None)
-        self._divergence(kernels.PRECONDITIONED, None, x, y, self.dinv, y, 0.0, c, y)
 
 
 # A run touching more kept shear edges than this is taken as held by its neighbours (see
