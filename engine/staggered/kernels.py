@@ -150,10 +150,10 @@ def stress_divergence(d: ti.template(), mode: ti.template(), listed: ti.template
     """A x = mask (h^{d-1} div(weighted stresses) + shift m x), the operator K (+ shift M), at the
     faces of the n positions of a part (whose stresses and their neighbours' must be current).
     ``mode``: APPLY y = A x; RESIDUAL y = b - A x; CHEBYSHEV step = c1 step + c2 dinv (b - A x),
-    x += step (one step of the Chebyshev recurrence; c1 = 0 never reads step). Fusing these into the
-    divergence saves writing and re-reading A x, and x is only read at the face itself (the stresses were computed
-    before), so updating it in place is safe. Arrays a mode does not use may be any array of the
-    right rank. The surface terms' S x, on their few DOFs, comes after: :func:`surface_add`."""
+    x += step (one step of the Chebyshev recurrence; c1 = 0 never reads step). Fusing these into
+    the divergence saves writing and re-reading A x, and x is only read at the face itself (the
+    stresses were computed before), so updating it in place is safe. Arrays a mode does not use may
+    be any array of the right rank. The surface terms' S x, on their few DOFs, comes after: :func:`surface_add`."""
     for i in range(n):
         p = position(listed, pos, i)
         t = p >> (BITS * d)
@@ -542,8 +542,9 @@ def surface_add(mode: ti.template(), slots: ti.types.ndarray(), n: ti.i32, comp:
                 c2: float, step: ti.types.ndarray(), x: ti.types.ndarray(), y: ti.types.ndarray()):
     """What S x (``sx`` [k], at the surface DOFs comp[k], pos[k]) adds to A x in each mode of
     :func:`stress_divergence`, after it, at the surface DOFs ``slots[:n]`` (those of the part it
-    ran over): APPLY y += mask sx, RESIDUAL y -= mask sx, CHEBYSHEV step and x -= c2 dinv sx. A pass over the few surface DOFs instead of a full [d, size] array of
-    S x read by the divergence (10 bytes per unknown on the 256^3 shell); each DOF once: no races."""
+    ran over): APPLY y += mask sx, RESIDUAL y -= mask sx, CHEBYSHEV step and x -= c2 dinv sx. A
+    pass over the few surface DOFs instead of a full [d, size] array of S x read by the divergence
+    (10 bytes per unknown on the 256^3 shell); each DOF once: no races."""
     for i in range(n):
         k = slots[i]
         a, p = comp[k], pos[k]
