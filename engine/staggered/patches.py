@@ -76,27 +76,35 @@ def band_inverse(level: Level) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix] |
         return None
     size = level.size
     dofs = np.unique(patches[patches >= 0])
-    block = operator_block(level, dofs).tocoo()
+    block = operator_block(level, dofs)
+    block.sum_duplicates()  # canonical CSR: its (row, column) keys come sorted
     n = len(dofs)
-    entry_keys = block.row.astype(np.int64) * n + block.col
-    order = np.argsort(entry_keys)
-    entry_keys, entry_vals = entry_keys[order], block.data[order]
+    entry_keys = np.repeat(np.arange(n, dtype=np.int64) * n, np.diff(block.indptr)) + block.indices
+    entry_vals = block.data
     local = np.where(patches >= 0, np.searchsorted(dofs, np.maximum(patches, 0)), -1)
     m = local.shape[1]
+    # A_p and its inverse are symmetric: the upper triangles alone are looked up and summed
+    iu, ju = np.triu_indices(m)
     rows, cols, vals = [], [], []
     for start in range(0, len(local), CHUNK):
         idx = local[start : start + CHUNK]
         on = idx >= 0
-        pair = np.maximum(idx, 0)[:, :, None] * n + np.maximum(idx, 0)[:, None, :]
+        both = on[:, iu] & on[:, ju]
+        pair = np.maximum(idx, 0)[:, iu] * n + np.maximum(idx, 0)[:, ju]
         at = np.minimum(np.searchsorted(entry_keys, pair), len(entry_keys) - 1)
-        a = np.where((entry_keys[at] == pair) & on[:, :, None] & on[:, None, :], entry_vals[at], 0.0)
+        upper = np.where((entry_keys[at] == pair) & both, entry_vals[at], 0.0)
+        a = np.empty((len(idx), m, m))
+        a[:, iu, ju] = upper
+        a[:, ju, iu] = upper
         a[:, np.arange(m), np.arange(m)] += ~on  # a missing face: a unit pivot, dropped below
         inv = _spd_inverse(a)
-        both = on[:, :, None] & on[:, None, :]
-        rows.append(np.broadcast_to(idx[:, :, None], both.shape)[both])
-        cols.append(np.broadcast_to(idx[:, None, :], both.shape)[both])
-        vals.append(inv[both])
-    z = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), (n, n))
+        rows.append(idx[:, iu][both])
+        cols.append(idx[:, ju][both])
+        vals.append(inv[:, iu, ju][both])
+    upper = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), (n, n))
+    # patch-local order is not the global one: an upper-triangle entry may land below the diagonal,
+    # so the full matrix is the sum with the transpose less the diagonal counted twice
+    z = (upper + upper.T - sp.diags(upper.diagonal())).tocsr()
     return dofs // size, dofs % size, z
 
 
@@ -150,20 +158,21 @@ def operator_block(level: Level, keys: np.ndarray) -> sp.csr_matrix:
     cells = _unique_rows(np.concatenate([index - eye[a] * (comp == a)[:, None] for a in range(d)] + [index]))[0]
     vc = _at(level.vc_host, lay, cells)
     moduli = level.mu * 2.0 * np.eye(d) + level.lam * np.ones((d, d))
-    normal = [strains([(k, cells + eye[k], 1.0 / h), (k, cells, -1.0 / h)], len(cells)) for k in range(d)]
-    k_mat = sp.csr_matrix((n, n))
-    for i, j in itertools.product(range(d), repeat=2):
-        k_mat = k_mat + normal[i].T @ sp.diags(moduli[i, j] * vc) @ normal[j]
+    # every strain of the block stacked, K = h^d B^T W B in one product: W couples a cell's normal
+    # strains through the moduli, an edge's shear strain is weighted alone
+    blocks = [strains([(k, cells + eye[k], 1.0 / h), (k, cells, -1.0 / h)], len(cells)) for k in range(d)]
+    weights = [sp.kron(moduli, sp.diags(vc))]
     # shear edges beside the DOFs: 2 h eps_ab = u_a(E) - u_a(E - e_b) + u_b(E) - u_b(E - e_a)
     for q, (a, b) in enumerate(axis_pairs(d)):
         near = np.concatenate([index[comp == a] + s * eye[b] for s in (0, 1)] + [index[comp == b] + s * eye[a] for s in (0, 1)])
         if not len(near):
             continue
         edges = _unique_rows(near)[0]
-        shear = strains([(a, edges, 0.5 / h), (a, edges - eye[b], -0.5 / h), (b, edges, 0.5 / h),
-                         (b, edges - eye[a], -0.5 / h)], len(edges))
-        k_mat = k_mat + shear.T @ sp.diags(4.0 * level.mu * _at(level.ve_host[q], lay, edges)) @ shear
-    k_mat = h**d * k_mat
+        blocks.append(strains([(a, edges, 0.5 / h), (a, edges - eye[b], -0.5 / h), (b, edges, 0.5 / h),
+                               (b, edges - eye[a], -0.5 / h)], len(edges)))
+        weights.append(sp.diags(4.0 * level.mu * _at(level.ve_host[q], lay, edges)))
+    B = sp.vstack(blocks).tocsr()
+    k_mat = h**d * (B.T @ (sp.block_diag(weights, format="csr") @ B))
     if level.shift != 0.0 and level.mass is not None:
         k_mat = k_mat + sp.diags(level.shift * level.mass.to_numpy()[comp, pos])
     sf = level.surface
