@@ -122,20 +122,21 @@ def _admit(spec, base_dir: Path):
                      max_cells=limits.max_cells)
     entry = method_entry(spec.method.kind)
     entry.check_dimension(spec.dimension)
-    _check_memory(grid, entry, spec.method, limits, surface)
+    _check_memory(grid, spec, limits, surface)
     entry.check_job(spec, grid)
     return surface, grid
 
 
-def _check_memory(grid, entry, method_spec, limits, surface) -> None:
+def _check_memory(grid, spec, limits, surface) -> None:
     from .errors import GridError
+    from .pipeline import estimate_memory, memory_refusal
 
-    need = entry.estimate_memory(grid, method_spec, surface=surface)
-    if need > limits.max_memory_bytes:
-        raise GridError(
-            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{entry.kind}', "
-            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB (VOXELASTIC_MAX_MEMORY_GB); increase "
-            "the cell size or lower the resolution")
+    limit = limits.max_memory_bytes
+    refused = memory_refusal(estimate_memory(grid, spec.method, surface, job=spec), limit, spec, grid, surface)
+    if refused is not None:
+        where, what, advice = refused
+        raise GridError(f"{'.'.join(where)}: {what}, over the limit of {limit / 2**30:.1f} GiB "
+                        f"(VOXELASTIC_MAX_MEMORY_GB); {advice}")
 
 
 class ProgressBar:
@@ -232,7 +233,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_voxelize(args) -> int:
-    from .errors import VoxelasticError
+    from .errors import GridError, VoxelasticError
     from .geometry.fractions import volume_fractions
     from .geometry.loading import load_surface
     from .grid import make_grid
@@ -254,7 +255,11 @@ def cmd_voxelize(args) -> int:
                          max_cells=limits.max_cells)
         # what runs here is the volume-fraction stage: the estimate of a method built on it
         entry = next(m for m in METHODS.values() if m.geometry == "fractions")
-        _check_memory(grid, entry, None, limits, surface)
+        need = entry.estimate_memory(grid, None, surface=surface)
+        if need > limits.max_memory_bytes:
+            raise GridError(f"{args.mesh}: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB, "
+                            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB (VOXELASTIC_MAX_MEMORY_GB); "
+                            "increase the cell size or lower the resolution")
         _check_room(args.output, grid.shape, [], vertices=len(surface.vertices))
         init("cpu", "f64")
         vf = volume_fractions(surface, grid)

@@ -31,7 +31,7 @@ from .geometry.surface import Surface
 from .analysis import Progress
 from .grid import Grid, make_grid
 from .method import Method, Setup, method_entry
-from .output import FieldData, Result, SolverReport
+from .output import FieldData, Result, SolverReport, components
 
 if TYPE_CHECKING:
     from .geometry.slicing import CutCells
@@ -69,18 +69,52 @@ def _quiet(stage: str, fraction: float, info: dict) -> None:
     pass
 
 
-def estimate_memory(grid: Grid, method_spec, surface: Surface | None = None) -> int:
+def estimate_memory(grid: Grid, method_spec, surface: Surface | None = None, job: JobSpec | None = None) -> int:
     """Upper estimate of a job's peak memory [bytes] from the grid, the spec's ``method`` and the solid's
-    ``surface`` (before any cut-cell work): the method's own estimate (``engine.method``)."""
-    return method_entry(method_spec.kind).estimate_memory(grid, method_spec, surface=surface)
+    ``surface`` (before any cut-cell work): the method's own estimate (``engine.method``), and with the
+    whole spec ``job`` the steps its run keeps (``held_steps_bytes``)."""
+    need = method_entry(method_spec.kind).estimate_memory(grid, method_spec, surface=surface)
+    return need + (held_steps_bytes(job, grid, surface) if job is not None else 0)
 
 
-def _check_memory(need: int, grid: Grid, method: str, limits: Limits) -> None:
-    if need > limits.max_memory_bytes:
-        raise GridError(
-            f"grid: a {'x'.join(map(str, grid.shape))} grid needs about {need / 2**30:.1f} GiB for method '{method}', "
-            f"over the limit of {limits.max_memory_bytes / 2**30:.1f} GiB; increase grid.cell_size or lower grid.resolution"
-        )
+def held_steps_bytes(spec: JobSpec, grid: Grid, surface: Surface | None = None) -> int:
+    """Memory [bytes] of the states a quasi-static or dynamic run keeps until its result is written:
+    every step's output fields, dense over the grid and on the surface's vertices and the probes
+    (``FieldData``), but the last, which the method's own estimate holds; 0 for a static run."""
+    if spec.analysis.kind == "static":
+        return 0
+    per_point = sum(max(1, len(components(name, grid.dim))) for name in spec.output.fields)
+    # the surface carries every field but the velocity
+    on_surface = per_point - (grid.dim if "velocity" in spec.output.fields else 0)
+    vertices = len(surface.vertices) if surface is not None and spec.output.surface else 0
+    per_step = (grid.num_cells + len(spec.output.probes)) * per_point + vertices * on_surface
+    return 8 * (spec.analysis.steps - 1) * per_step
+
+
+def memory_refusal(need: int, limit: int, spec: JobSpec, grid: Grid, surface: Surface | None = None,
+                   ) -> tuple[tuple[str, ...], str, str] | None:
+    """(the spec's field to change, what exceeds the limit, what to do) when a job's estimate ``need``
+    [bytes] exceeds ``limit`` [bytes], None when it fits: the steps the run keeps when they are most of
+    it, else the grid. The caller names the limit (its setting differs) between the two sentences."""
+    if need <= limit:
+        return None
+    shape = "x".join(map(str, grid.shape))
+    held = held_steps_bytes(spec, grid, surface)
+    if 2 * held > need:
+        what = (f"{spec.analysis.steps} steps of output.fields [{', '.join(spec.output.fields)}] on a {shape} grid are "
+                f"kept until the result is written: {held / 2**30:.2f} GiB of the {need / 2**30:.2f} GiB the job needs "
+                f"with method '{spec.method.kind}'")
+        return ("analysis", "steps"), what, "lower analysis.steps, output fewer fields or increase grid.cell_size"
+    what = f"a {shape} grid needs about {need / 2**30:.2f} GiB for method '{spec.method.kind}'"
+    return ("grid",), what, "increase grid.cell_size or lower grid.resolution"
+
+
+def _check_memory(need: int, limits: Limits, spec: JobSpec, grid: Grid, surface: Surface | None = None) -> None:
+    refused = memory_refusal(need, limits.max_memory_bytes, spec, grid, surface)
+    if refused is not None:
+        where, what, advice = refused
+        limit = limits.max_memory_bytes / 2**30
+        raise GridError(f"{'.'.join(where)}: {what}, over the limit of {limit:.2f} GiB; {advice}")
 
 
 def read_mesh_input(spec: JobSpec, mesh: MeshInput, filename: str | None, base_dir: Path | None) -> tuple[bytes, str]:
@@ -147,8 +181,7 @@ def prepare_geometry(
     grid = make_grid(*surface.bounds, cell_size=gs.cell_size, resolution=gs.resolution, padding=gs.padding, max_cells=limits.max_cells)
     entry = method_entry(spec.method.kind)
     entry.check_dimension(spec.dimension)
-    method = entry.kind
-    _check_memory(entry.estimate_memory(grid, spec.method, surface=surface), grid, method, limits)
+    _check_memory(estimate_memory(grid, spec.method, surface, job=spec), limits, spec, grid, surface)
     entry.check_job(spec, grid)
     times["grid"] = time.perf_counter() - t
     progress("grid", 0.1, {"shape": list(grid.shape), "spacing": grid.spacing})
@@ -162,7 +195,8 @@ def prepare_geometry(
     }
     geo = compute_geometry(entry.kind, surface, grid, cache=cache, identity=identity, params=params)
     if geo.cut_cells is not None:  # cells holding several pieces hold several elements: the count, not the bound
-        _check_memory(entry.estimate_memory(grid, spec.method, occupied=geo.cut_cells.num_pieces), grid, method, limits)
+        need = entry.estimate_memory(grid, spec.method, occupied=geo.cut_cells.num_pieces)
+        _check_memory(need + held_steps_bytes(spec, grid, surface), limits, spec, grid, surface)
     times["cut_cells"] = time.perf_counter() - t
     geo.stage_times = times
     progress("cut_cells", 0.3, {"cache_hit": geo.cache_hit})

@@ -149,7 +149,7 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
     from engine.geometry.loading import load_surface
     from engine.grid import make_grid
     from engine.method import method_entry
-    from engine.pipeline import check_boundaries, estimate_memory, load_geometry
+    from engine.pipeline import check_boundaries, estimate_memory, load_geometry, memory_refusal
 
     spec = parse_spec(spec_text)
     try:
@@ -208,14 +208,13 @@ def check_submission(spec_text: str | bytes, mesh: bytes | None, mesh_filename: 
         method_entry(spec.method.kind).check_job(spec, grid)
     except VoxelasticError as exc:
         raise Rejected(422, [_engine_error(str(exc))]) from None
-    need = estimate_memory(grid, spec.method, surface)
+    need = estimate_memory(grid, spec.method, surface, job=spec)
     limit = int(settings.max_job_memory_bytes)
-    if need > limit:
-        shape = "x".join(map(str, grid.shape))
-        raise Rejected(422, [_error(["body", "spec", "grid"],
-                                    f"a {shape} grid needs about {need / 2**30:.2f} GiB for method '{spec.method.kind}', "
-                                    f"over this server's limit of {limit / 2**30:.2f} GiB per job; "
-                                    "increase grid.cell_size or lower grid.resolution")])
+    refused = memory_refusal(need, limit, spec, grid, surface)
+    if refused is not None:
+        where, what, advice = refused
+        raise Rejected(422, [_error(["body", "spec", *where], f"{what}, over this server's limit of "
+                                    f"{limit / 2**30:.2f} GiB per job (VOXELASTIC_MAX_JOB_MEMORY_BYTES); {advice}")])
     try:  # as `voxelastic validate`: a region holding no surface used to be a 202 and a failed job
         check_boundaries(spec, surface)
     except VoxelasticError as exc:

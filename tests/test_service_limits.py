@@ -25,7 +25,10 @@ def server(tmp_path_factory):
         max_upload_bytes=UPLOAD_LIMIT,
         max_triangles=200,
         max_cells=200_000,
-        max_job_memory_bytes=50 * 2**20,
+        # above the memory estimates of the jobs run here (the long job's 400 steps 0.73 GiB, cantilever(128)
+        # 0.64 GiB: the estimate holds the process and the worst material, above their peaks), below
+        # 2000 steps of the long job (1.44 GiB) and a DG job on cantilever(150)'s grid
+        max_job_memory_bytes=2**30,
         # between the long job's peak (336-359 MiB resident: the V-cycle's coarsest factor by PARDISO
         # maps ~37 MiB of MKL since 2026-11-28) and the big one's (445 MiB)
         worker_memory_bytes=400 * 2**20,
@@ -88,10 +91,17 @@ def test_too_many_facets_cells_or_memory_is_422_before_any_work(server):
     (err,) = r.json()["detail"]
     assert err["loc"][:3] == ["body", "spec", "grid"] and "200000" in err["msg"].replace(",", "")
 
-    r = server.submit(cantilever(150))  # 156k cells: within max_cells, but its memory estimate is 51 MB > 50 MB
+    dg = cantilever(150)  # 156k cells: within max_cells, but DG k = 2 there needs about 19 GiB
+    dg["method"] = {"kind": "dg", "degree": 2}
+    r = server.submit(dg)
     assert r.status_code == 422
     (err,) = r.json()["detail"]
-    assert err["loc"] == ["body", "spec", "grid"] and "over this server's limit of 0.05 GiB" in err["msg"]
+    assert err["loc"] == ["body", "spec", "grid"] and "over this server's limit of 1.00 GiB" in err["msg"], err
+    r = server.submit(long_job(2000))  # its steps' fields, kept until the result is written: 0.89 of 1.44 GiB
+    assert r.status_code == 422
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "spec", "analysis", "steps"], err
+    assert err["msg"].startswith("2000 steps of output.fields [displacement") and "lower analysis.steps" in err["msg"]
     assert server.client.get("/jobs").json()["total"] == 0  # nothing was queued
 
 

@@ -8,6 +8,7 @@ about half of its bounding grid, a shell about 40%.
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 from scipy import ndimage
@@ -16,33 +17,75 @@ from engine.geometry.surface import Surface
 from engine.geometry.winding import inside
 from engine.grid import Grid
 
-# Grids above this many cells get no count: 5 bytes a cell to label the regions, and a method that stores
-# only occupied cells (DG: 100 unknowns a cell at degree 2) could not solve a tenth of that grid anyway.
+# Grids above this many cells are counted on a grid coarsened by a power of two (5 bytes a cell to label
+# its regions): the bound then holds each fine cell of a coarse cell that may hold solid.
 LARGEST_COUNTED = 1 << 24
 
 
-def occupied_cells_bound(surface: Surface, grid: Grid) -> int:
-    """Upper bound on the cells of ``grid`` that hold solid bounded by ``surface``.
+def occupied_cells(surface: Surface, grid: Grid) -> tuple[np.ndarray, int] | None:
+    """(mask, factor): the cells that may hold solid bounded by ``surface``, as a bool mask over ``grid``
+    coarsened by ``factor`` (1, 2, 4 ...: the least that keeps the mask within LARGEST_COUNTED cells;
+    coarse cell J covers the fine cells factor J ... factor J + factor - 1 along each axis); None for an
+    open surface (a solid by winding number, which may pass 1/2 inside a region near a hole) or none.
 
     A cell holding solid either has the surface crossing its interior -- then the bounding box of a
     facet, or of a piece of a facet split to the cell size, overlaps it -- or lies wholly inside.
     Cells no such box overlaps form connected regions the surface does not cross, each wholly inside
-    or wholly outside a closed surface: one winding-number test per region decides. Open surfaces
-    (solids by winding number, which may pass 1/2 inside such a region near a hole) get every cell of
-    the grid, and so do grids above LARGEST_COUNTED cells.
+    or wholly outside a closed surface: one winding-number test per region decides.
     """
-    if not surface.closed or len(surface.faces) == 0 or grid.num_cells > LARGEST_COUNTED:
-        return grid.num_cells
-    crossed = _crossed_cells(surface.vertices[surface.faces], grid)
-    labels, count = ndimage.label(~crossed)
+    if not surface.closed or len(surface.faces) == 0:
+        return None
+    factor = 1
+    while math.prod(-(-n // factor) for n in grid.shape) > LARGEST_COUNTED:
+        factor *= 2
+    if factor > 1:
+        grid = Grid(origin=grid.origin, spacing=grid.spacing * factor, shape=tuple(-(-n // factor) for n in grid.shape))
+    mask = _crossed_cells(surface.vertices[surface.faces], grid)
+    labels, count = ndimage.label(~mask)
     if count == 0:
-        return int(crossed.sum())
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+        return mask, factor
     _, first = np.unique(labels.ravel(), return_index=True)  # one cell of each region (label 0: crossed)
     first = first[1:] if labels.ravel()[first[0]] == 0 else first
     centres = grid.sample_points(np.stack(np.unravel_index(first, grid.shape), axis=1))
-    solid = inside(surface.vertices, surface.faces, centres)
-    return int(crossed.sum() + sizes[solid].sum())
+    solid = np.concatenate([[False], inside(surface.vertices, surface.faces, centres)])
+    mask |= solid[labels]
+    return mask, factor
+
+
+def occupied_cells_bound(surface: Surface, grid: Grid) -> int:
+    """Upper bound on the cells of ``grid`` that hold solid bounded by ``surface`` (``occupied_cells``);
+    every cell of the grid for an open surface."""
+    found = occupied_cells(surface, grid)
+    if found is None:
+        return grid.num_cells
+    mask, factor = found
+    # fine cells of the grid inside each coarse cell, per axis (the last coarse cell may hang over)
+    weight = np.ones(mask.shape)
+    for a, n in enumerate(grid.shape):
+        along = np.minimum(factor, n - factor * np.arange(mask.shape[a]))
+        weight = weight * along.reshape([-1 if k == a else 1 for k in range(grid.dim)])
+    return int(weight[mask].sum())
+
+
+def occupied_tiles_bound(surface: Surface, grid: Grid, tile: int) -> int:
+    """Upper bound on the tiles of ``tile``^d samples of the staggered index box (n + 1 per axis: a cell
+    and its faces and edges on its low sides share an index) that hold a sample of a cell that may hold
+    solid: the tiles a method storing only those stores. Every tile of the box for an open surface."""
+    box = [n + 1 for n in grid.shape]
+    found = occupied_cells(surface, grid)
+    if found is None or tile % found[1]:
+        return math.prod(-(-n // tile) for n in box)
+    mask, factor = found
+    # a cell's samples reach one index past it on each axis: pad one ahead, dilate by one cell upward
+    reach = np.pad(mask, [(0, 1)] * grid.dim)
+    for a in range(grid.dim):
+        below = np.roll(reach, 1, axis=a)
+        below[tuple(0 if k == a else slice(None) for k in range(grid.dim))] = False
+        reach |= below
+    k = tile // factor  # coarse cells per tile along an axis
+    reach = np.pad(reach, [(0, -n % k) for n in reach.shape])
+    blocks = reach.reshape([x for n in reach.shape for x in (n // k, k)])
+    return int(blocks.any(axis=tuple(range(1, 2 * grid.dim, 2))).sum())
 
 
 # Facet pieces split per round, at most: bounds the memory of splitting a coarse mesh on a fine grid.

@@ -7,10 +7,11 @@ from typing import TYPE_CHECKING
 
 from ..boundary import make_boundaries
 from ..errors import MethodUnavailableError
-from ..geometry.fractions import control_offsets
+from ..geometry.occupancy import occupied_tiles_bound
 from ..grid import Grid
 from ..material import Material
 from ..method import Setup
+from .layout import TILE
 
 if TYPE_CHECKING:
     from .elasticity import StaggeredElasticity
@@ -30,6 +31,17 @@ DIRECT_SAMPLES = 60_000
 # assembly over the dense index box (``assembly.stiffness``): ASSEMBLY_BYTES per position
 FACTOR_BYTES = 70.0
 ASSEMBLY_BYTES = 600
+# A job's peak resident memory (``estimate_memory``), fitted above whole jobs' peaks, each in a fresh
+# process (benchmarks.staggered_memory: cubes filling their grids, a ball, a shell and a plate at 64^3 to
+# 256^3, a 2D annulus at 1024^2 to 4096^2; static and dynamic, nu 0.3 and 0.4999, displacement or every
+# field; docs/benchmarks.md, "The staggered memory estimate against whole jobs"): the process with
+# NumPy, SciPy and Taichi loaded (a direct solve of a small job peaks at ~240 MiB), the first V-cycle's
+# kernels in a process, per kept sample position (the fractions, the levels, CG's vectors, the curl
+# path's edge arrays and band inverses, the surface terms) and per grid cell (the fields written).
+BASE_BYTES = 300 * 2**20
+KERNEL_BYTES = 250 * 2**20
+POSITION_BYTES = {2: 315, 3: 734}
+CELL_BYTES = {2: 165, 3: 160}
 
 
 def solves_directly(grid: Grid, solver: str = "auto") -> bool:
@@ -49,15 +61,24 @@ def _positions(grid: Grid) -> int:
 
 
 def estimate_memory(grid: Grid, method_spec=None, surface=None, occupied: int | None = None) -> int:
-    """Upper estimate of a job's peak memory [bytes] from the grid alone: per cell, the fractions
-    of every control-volume kind plus ~12 solver vectors per displacement component (CG and the
-    multigrid hierarchy), and the factor of a direct solve (``solves_directly``). ``surface`` and
-    ``occupied`` are not used: the fractions and the output fields are dense over the grid."""
+    """Upper estimate of a job's peak resident memory [bytes], process included: BASE_BYTES, the
+    kernels' compilation when the job builds a V-cycle (KERNEL_BYTES), POSITION_BYTES per sample
+    position of the tiles the fine level keeps (``occupied_tiles_bound`` of ``surface``; every tile of
+    the index box without it), CELL_BYTES per grid cell for the dense output fields, and the factor of
+    a direct solve (``solves_directly``). The material and the fields asked for are not known here, so
+    it holds for the worst of them: nu near 1/2 (the curl path's arrays) and every stress field, in a
+    dynamic run. ``occupied`` (cut-cell pieces) is not used."""
     d = grid.dim
-    need = grid.num_cells * 8 * (len(control_offsets(d)) + 12 * d)
+    if surface is not None:
+        tiles = occupied_tiles_bound(surface, grid, TILE)
+    else:
+        tiles = math.prod(-(-(n + 1) // TILE) for n in grid.shape)
+    need = BASE_BYTES + POSITION_BYTES[d] * tiles * TILE**d + CELL_BYTES[d] * grid.num_cells
     if solves_directly(grid, getattr(method_spec, "solver", "auto")):
         need += direct_bytes(grid)
-    return need
+    else:
+        need += KERNEL_BYTES
+    return int(need)
 
 
 def make_staggered(spec, geo, functions, progress: Setup | None = None) -> StaggeredElasticity:
