@@ -78,8 +78,8 @@ exec(JOB)
 def test_the_estimate_holds_a_whole_jobs_peak(body, resolution, analysis):
     """A cube filling its grid and a shell at nu 0.4999 (the curl path), every field and the surface, each in
     a fresh process: the peak resident memory stays under the estimate, and the estimate is within 2.5x of
-    it. The estimate before 2026-11-29 counted 320 bytes per grid cell and no process: 94 MiB against a
-    peak of 620 MiB for the cube."""
+    it. The estimate before 2026-11-29 counted 320 bytes per grid cell and no process: 94 MiB for the 64^3
+    cube, whose static run at nu 0.4999 peaked at 617 MiB (docs/benchmarks.md)."""
     fields = "displacement,strain,stress,von_mises,pressure" + (",velocity" if analysis == "dynamic" else "")
     out = subprocess.run([sys.executable, "-c", PEAK, body, str(resolution), "0.4999", fields, analysis, "surface", "3"],
                          cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
