@@ -122,7 +122,9 @@ class Ball:
             todo, parent = split_facets(todo[split])
             source = source[split][parent]
         d = facets.shape[-1]
-        return np.concatenate(pieces).reshape(-1, d, d), np.concatenate(owner).astype(np.int64)
+        # no facets at all (a facing filter that keeps none) leaves the loop unrun
+        return (np.concatenate([np.empty((0, d, d)), *pieces]).reshape(-1, d, d),
+                np.concatenate([np.empty(0, dtype=np.int64), *owner]).astype(np.int64))
 
 
 Region = Halfspaces | Ball

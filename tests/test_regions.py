@@ -121,3 +121,21 @@ def test_a_ball_clips_a_sliver_in_few_pieces_and_keeps_its_area():
     assert facet_measures(pieces).sum() == pytest.approx(0.002 * (0.7**2 - 0.3**2), rel=1e-3)
     normals = np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0])
     assert np.all(normals[:, 2] > 0)  # every piece keeps the needle's orientation
+
+
+def test_a_facing_ball_that_keeps_no_facet_names_the_boundary():
+    """A sphere region whose facing filter keeps no facet handed the ball nothing to clip, and the
+    clip's empty concatenation was a ValueError: a traceback from run, a 500 from the service."""
+    from engine.boundary import Facing
+
+    cube = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    facets = cube.vertices[cube.faces]
+    ball = Ball(np.array([0.5, 0.5, 0.5]), 0.3)
+    pieces, source = ball.clip(facets[:0])
+    assert pieces.shape == (0, 3, 3) and source.shape == (0,) and source.dtype == np.int64
+    upward = Facing(ball, np.array([0.0, 0.0, 1.0]), 30.0)
+    assert facet_measures(select_patch(upward, facets, "b")[0]).sum() == pytest.approx(0.3**2 * np.pi / 4, rel=2e-2)
+    sideways = Facing(ball, np.array([1.0, -1.0, 0.0]), 10.0)  # the cube's normals are 45 degrees off
+    with pytest.raises(VoxelasticError, match=r"^boundaries.0 \(seat\): none of the 0.21\d* m\^2 of surface in its region "
+                                              r"faces within 10 degrees of \(0.707, -0.707, 0\)"):
+        select_patch(sideways, facets, "boundaries.0 (seat)")
