@@ -116,6 +116,9 @@ class DGElasticity(BoundaryTerms, Fields):
     max_iterations: int = 5000
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
+    # True: a dynamic job, every solve carries the mass, which holds a body no boundary holds: its
+    # loads need not balance (it accelerates) and no rigid motion is taken out of it
+    free_bodies_accelerate: bool = False
 
     def __post_init__(self) -> None:
         if self.degree not in (1, 2):
@@ -205,7 +208,8 @@ class DGElasticity(BoundaryTerms, Fields):
                 assembly.add_to_diagonal(A, self.material.density * self.basis.h**3 / self.dt**2)
             self.timings["assembly"] = self.timings.get("assembly", 0.0) + time.perf_counter() - t
             t = time.perf_counter()
-            modes = self._mode_matrix() if self.modes else None
+            # with a mass every body is held; without one a free body's rigid modes are bordered out
+            modes = self._mode_matrix() if self.modes and self.dt is None else None
             try:
                 if self.iterative:
                     self.matrix = A
@@ -361,7 +365,7 @@ class DGElasticity(BoundaryTerms, Fields):
         factor, 1e-3 relative accuracy); NaN when rigid modes are bordered out."""
         import scipy.sparse.linalg as spla
 
-        if self.modes:
+        if self.modes and self.dt is None:
             return float("nan")
         n = self.matrix.shape[0]
         top = spla.eigsh(self.matrix, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0]

@@ -104,6 +104,9 @@ class StaggeredElasticity(StaggeredFields):
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
     dynamic: bool = True  # False: no backward-Euler steps will come, so no mass is ever needed
+    # True: a dynamic job, every solve carries the mass, which holds a body no boundary holds: its
+    # loads need not balance (it accelerates) and no rigid motion is taken out of it
+    free_bodies_accelerate: bool = False
     # "direct": the whole problem factorised (sparse Cholesky), "iterative": multigrid-preconditioned
     # CG, "auto": direct on small grids (``problem.solves_directly``)
     solver: str = "auto"
@@ -163,7 +166,7 @@ class StaggeredElasticity(StaggeredFields):
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
-        if self.modes:
+        if self.modes and not self.free_bodies_accelerate:
             check_balance(points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
                           [(dofs, q) for dofs, q, _ in self.modes])
             free = sum(q.shape[1] for _, q, _ in self.modes)
@@ -416,7 +419,7 @@ class StaggeredElasticity(StaggeredFields):
         if inertia is not None:
             rhs += level.shift * level.mass.to_numpy() * inertia
         rhs *= level.free
-        if self.modes:
+        if self._removes_rigid_motion():
             rhs = self._project(rhs)
         b = device_array(rhs)
         del rhs
@@ -446,7 +449,7 @@ class StaggeredElasticity(StaggeredFields):
         # a true residual the restarts left above rtol (within the solver's slack) goes in the report
         self.warnings.extend(w for w in stats.warnings if w not in self.warnings)
         u = x.to_numpy().astype(np.float64, copy=False)
-        if self.modes:
+        if self._removes_rigid_motion():
             u = self._without_rigid_motion(self._project(u))
         u = u * level.free
         return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
@@ -461,7 +464,7 @@ class StaggeredElasticity(StaggeredFields):
 
     def _preconditioner(self, inner: Callable):
         """``inner`` followed by the projection off the free rigid modes, when there are any."""
-        if not self.modes:
+        if not self._removes_rigid_motion():
             return inner
 
         def projected(r, z) -> None:
@@ -469,6 +472,12 @@ class StaggeredElasticity(StaggeredFields):
             z.from_numpy(self._project(z.to_numpy()).astype(self.level.dtype))
 
         return projected
+
+    def _removes_rigid_motion(self) -> bool:
+        """Whether solves work off the free bodies' rigid modes: in statics they are the operator's
+        null space; a backward-Euler step's mass holds them, and removing them would stop a free
+        body from moving as its loads and momentum say."""
+        return bool(self.modes) and self.level.shift == 0.0
 
     def _without_rigid_motion(self, u: np.ndarray) -> np.ndarray:
         """u [d, size] less each free body's rigid motion in the material's sense (weighted by face
