@@ -139,7 +139,7 @@ class BoundaryTerms:
             q, _ = np.linalg.qr(modes)
             out.append((members, q))
             loose_bodies.append(label)
-        if out and not self.free_bodies_accelerate:
+        if out and self.time_step is None:
             size = np.abs(self.load_vector).sum()
             for (members, q), label in zip(out, loose_bodies):
                 f = self.load_vector[members].reshape(-1)

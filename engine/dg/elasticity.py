@@ -116,9 +116,10 @@ class DGElasticity(BoundaryTerms, Fields):
     max_iterations: int = 5000
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
-    # True: a dynamic job, every solve carries the mass, which holds a body no boundary holds: its
-    # loads need not balance (it accelerates) and no rigid motion is taken out of it
-    free_bodies_accelerate: bool = False
+    # a dynamic job's backward-Euler step [s]: the first factorisation is made with the mass (set_time_step
+    # would make a second), and since every solve carries the mass, which holds a body no boundary holds,
+    # such a body's loads need not balance (it accelerates)
+    time_step: float | None = None
 
     def __post_init__(self) -> None:
         if self.degree not in (1, 2):
@@ -159,7 +160,7 @@ class DGElasticity(BoundaryTerms, Fields):
         self.timings["loads"] = time.perf_counter() - t
         self.modes = self._free_modes()
         self.eta = float(self.penalty)
-        self.dt: float | None = None
+        self.dt: float | None = self.time_step
         self.rotations: np.ndarray | None = None
         self.warp_load = None
         self.solver: DirectSolver | PMultigrid | None = None  # the set-up solver; None once released

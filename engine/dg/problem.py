@@ -99,7 +99,8 @@ def make_dg(spec, geo, functions, progress: Setup | None = None) -> DGElasticity
     dg = DGElasticity(cut=geo.cut_cells, surface=geo.surface, material=material, degree=m.degree, flux=m.flux,
                       penalty=m.penalty, prescribed=b.prescribed, surface_loads=b.loads, body_force=b.body_force,
                       solver_kind=m.solver, rtol=spec.solver.rtol, max_iterations=spec.solver.max_iterations,
-                      progress=progress, free_bodies_accelerate=spec.analysis.kind == "dynamic")
+                      progress=progress,
+                      time_step=spec.analysis.time_step if spec.analysis.kind == "dynamic" else None)
     if spec.solver.precision == "f32":  # asked for to halve the memory, which it does not here
         dg.warnings.append(F32_IGNORED)
     return dg

@@ -104,9 +104,10 @@ class StaggeredElasticity(StaggeredFields):
     warnings: list[str] = field(default_factory=list)
     progress: Setup | None = field(default=None, repr=False)  # hears of the setup's parts
     dynamic: bool = True  # False: no backward-Euler steps will come, so no mass is ever needed
-    # True: a dynamic job, every solve carries the mass, which holds a body no boundary holds: its
-    # loads need not balance (it accelerates) and no rigid motion is taken out of it
-    free_bodies_accelerate: bool = False
+    # a dynamic job's backward-Euler step [s]: the multigrid is built for it at once (set_time_step
+    # would build its smoothers and coarsest factor a second time), and since every solve carries the
+    # mass, which holds a body no boundary holds, such a body's loads need not balance (it accelerates)
+    time_step: float | None = None
     # "direct": the whole problem factorised (sparse Cholesky), "iterative": multigrid-preconditioned
     # CG, "auto": direct on small grids (``problem.solves_directly``)
     solver: str = "auto"
@@ -166,7 +167,7 @@ class StaggeredElasticity(StaggeredFields):
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
-        if self.modes and not self.free_bodies_accelerate:
+        if self.modes and self.time_step is None:
             check_balance(points, self.dof_comp, self.loads[self.dof_comp, self.dof_pos],
                           [(dofs, q) for dofs, q, _ in self.modes])
             free = sum(q.shape[1] for _, q, _ in self.modes)
@@ -179,6 +180,8 @@ class StaggeredElasticity(StaggeredFields):
         # no warning for the control volumes raised to MIN_FRACTION (level.slivers): it bounds the
         # conditioning, adds at most that share of a cell's energy and asks nothing of the user
         # a one-level hierarchy is the fine level's factorisation: CG then stops after one step
+        if self.time_step is not None:
+            level.set_shift(1.0 / self.time_step**2, self.material.density)
         try:
             self.multigrid = Multigrid(level, max_levels=1 if solves_directly(grid, self.solver) else 12,
                                        progress=lambda part, share: say(part, 0.5 + 0.5 * share))
@@ -402,7 +405,10 @@ class StaggeredElasticity(StaggeredFields):
     # ------------------------------------------------------------------ solve
     def set_time_step(self, dt: float | None) -> None:
         """Backward Euler with step dt [s] adds M / dt^2 to the operator; None goes back to statics."""
-        self.level.set_shift(0.0 if dt is None else 1.0 / dt**2, self.material.density)
+        shift = 0.0 if dt is None else 1.0 / dt**2
+        if shift == self.level.shift:  # the step it was built for (``time_step``)
+            return
+        self.level.set_shift(shift, self.material.density)
         self.multigrid.update()
 
     def solve(self, load_scale: float = 1.0, value_scale: float = 1.0, x0: np.ndarray | None = None,
@@ -445,6 +451,12 @@ class StaggeredElasticity(StaggeredFields):
             # bodies joined through a point or an edge of the grid are nearly free: the solve stalls
             # (two bodies touching at a point: "stagnated at relative residual 1.53") for no fault of the tolerance
             joined = [w for w in self.warnings if JOINED in w]
+            if exc.reason == "precision" and self.modes and level.shift != 0.0:
+                # K u of a body moving rigidly by far more than it deforms rounds off at (c dt / h)^2 of
+                # eps relative to the loads, c the pressure wave's speed
+                raise SolverError(f"{exc}; here a body the displacement boundaries leave free to move rigidly moves "
+                                  "by far more than it deforms in one time step, and that motion's rounding sets the "
+                                  "floor: a smaller analysis.time_step lowers it with its square", exc.reason) from None
             raise (_joined_cause(exc, joined) if exc.reason != "cap" else exc) from None
         # a true residual the restarts left above rtol (within the solver's slack) goes in the report
         self.warnings.extend(w for w in stats.warnings if w not in self.warnings)

@@ -125,17 +125,20 @@ class Multigrid:
         self.work = [tuple(lv.zeros() for _ in range((3 if k else 1) + extra)) for k, lv in enumerate(self.levels)]
         # the first job in a process compiles kernels here
         say("multigrid smoothers and coarsest factor" if len(self.levels) > 1 else "sparse factor", 0.5)
+        self._held_checked = False  # the thin features' test, made once even when a mass is set from the start
         self.update()
 
     def update(self) -> None:
         """Propagate the fine level's prescribed DOFs and shift to the coarse levels; refactor.
         Raises ThinFeatureError when the fine stiffness (no shift) has zero-energy motions that
-        are not rigid motions: thin features the grid cannot hold (see ``unheld_groups``)."""
+        are not rigid motions: thin features the grid cannot hold (see ``unheld_groups``), also when
+        a mass holds them (a dynamic job's first setup): a sample tied to nothing would move alone."""
         fine = self.levels[0]
-        if fine.shift == 0.0:
+        if fine.shift == 0.0 or not self._held_checked:
             mech = unheld_groups(fine)
             if mech.count:
                 raise ThinFeatureError(describe_thin_features(fine, mech))
+            self._held_checked = True
         for k in range(1, len(self.levels)):
             lv, up = self.levels[k], self.levels[k - 1]
             d = lv.dim

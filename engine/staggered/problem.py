@@ -103,6 +103,6 @@ def make_staggered(spec, geo, functions, progress: Setup | None = None) -> Stagg
         max_iterations=spec.solver.max_iterations,
         progress=progress,
         dynamic=spec.analysis.kind == "dynamic",
-        free_bodies_accelerate=spec.analysis.kind == "dynamic",
+        time_step=spec.analysis.time_step if spec.analysis.kind == "dynamic" else None,
         solver=spec.method.solver,
     )
