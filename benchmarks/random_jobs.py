@@ -1,0 +1,220 @@
+"""Random valid jobs through ``engine.pipeline.run``: an exception that is not a named error, or a
+non-finite value in the solid's fields, is a finding.
+
+Usage:
+    .venv/bin/python -m benchmarks.random_jobs [--seed 0] [--count 60] [--dimension 3] [--precision f64]
+
+Each job is drawn from its seed alone (``--seed`` .. ``--seed + --count - 1``), so a finding is
+rerun with ``--seed N --count 1``. 3D: a box, ball, torus, thin plate, cylinder, capsule, two boxes,
+an open sphere, an inverted box, two overlapping spheres (one file, not united), a doubled box
+(every facet twice), a needle or a box with degenerate facets, rotated at random half the time;
+staggered (auto / iterative / direct) or DG (k = 1, 2; IP or BZ; corotated one time in five).
+2D: polygons (stars, annuli, rectangles, a thin strip, two squares), staggered. A clamp on one end
+most of the time, else a free body with pressure loads; extra holds, tractions and pressures on
+boxes, half-spaces or balls, with and without ``facing``; static, quasi-static or dynamic; random
+moduli (1e3-1e11 Pa), nu from 0 to 0.4999, fields, probes (one outside), resolution 6-28 (DG 6-14).
+Every job runs in this one process (Taichi is initialised once: ``--precision`` applies to all).
+
+Prints one line per job: ``ok`` with the iterations, residual and warnings' count, ``refused:``
+with the named error, or ``CRASH`` / ``BAD`` (written with its spec and traceback to ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+MESHES = ["box", "sphere", "torus", "plate", "cyl", "two", "capsule", "open", "inverted", "overlap", "dupes",
+          "needle", "degenerate"]
+FIELDS = ["displacement", "velocity", "strain", "stress", "von_mises", "pressure"]
+
+
+def mesh_3d(rng: np.random.Generator):
+    import trimesh
+
+    kind = str(rng.choice(MESHES))
+    box = trimesh.creation.box
+    if kind == "box":
+        m = box(extents=rng.uniform(0.2, 1.5, 3))
+    elif kind == "sphere":
+        m = trimesh.creation.icosphere(subdivisions=3, radius=rng.uniform(0.2, 1))
+    elif kind == "torus":
+        m = trimesh.creation.torus(major_radius=0.6, minor_radius=rng.uniform(0.1, 0.3))
+    elif kind == "plate":
+        m = box(extents=[1, 1, rng.uniform(0.01, 0.1)])
+    elif kind == "cyl":
+        m = trimesh.creation.cylinder(radius=rng.uniform(0.05, 0.3), height=1.0)
+    elif kind == "capsule":
+        m = trimesh.creation.capsule(height=0.8, radius=0.2)
+    elif kind == "two":
+        a = box(extents=[0.4, 0.4, 0.4])
+        b = a.copy()
+        b.apply_translation([rng.uniform(0.3, 0.8), 0, 0])
+        m = trimesh.util.concatenate([a, b])
+    elif kind == "inverted":
+        m = box(extents=[1, 0.3, 0.3])
+        m.invert()
+    elif kind == "overlap":
+        a = trimesh.creation.icosphere(subdivisions=2, radius=0.4)
+        b = a.copy()
+        b.apply_translation([0.3, 0.1, 0])
+        m = trimesh.util.concatenate([a, b])
+    elif kind == "dupes":
+        a = box(extents=[1, 0.4, 0.2])
+        m = trimesh.Trimesh(np.vstack([a.vertices, a.vertices]),
+                            np.vstack([a.faces, a.faces + len(a.vertices), a.faces[:3]]), process=False)
+    elif kind == "needle":
+        m = trimesh.creation.cylinder(radius=0.004, height=1.0, sections=6)
+    elif kind == "degenerate":
+        a = box(extents=[0.8, 0.5, 0.5])
+        m = trimesh.Trimesh(np.vstack([a.vertices, a.vertices[:1]]), np.vstack([a.faces, [[0, 0, 1], [0, 8, 1]]]),
+                            process=False)
+    else:  # open: a sphere less one facet
+        m = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+        m.update_faces(np.arange(len(m.faces)) != 0)
+    if rng.random() < 0.5:
+        m.apply_transform(trimesh.transformations.random_rotation_matrix(rng.uniform(0, 1, 3)))
+    return kind, m
+
+
+def loops_2d(rng: np.random.Generator) -> tuple[str, list[np.ndarray]]:
+    kind = str(rng.choice(["star", "annulus", "rect", "thin", "two"]))
+    t = np.linspace(0, 2 * np.pi, int(rng.integers(5, 60)), endpoint=False)
+    if kind == "star":
+        r = 0.5 + rng.uniform(0, 0.3) * np.cos(int(rng.integers(2, 7)) * t)
+        return kind, [np.c_[r * np.cos(t), r * np.sin(t)]]
+    if kind == "annulus":
+        inner = rng.uniform(0.2, 0.8)
+        return kind, [np.c_[np.cos(t), np.sin(t)], (inner * np.c_[np.cos(t), np.sin(t)])[::-1]]
+    if kind == "rect":
+        w = rng.uniform(0.1, 2)
+        return kind, [np.array([[0, 0], [w, 0], [w, 0.5], [0, 0.5]])]
+    if kind == "thin":
+        return kind, [np.array([[0, 0], [1, 0], [1, 0.01], [0, 0.01]])]
+    square = np.array([[0, 0], [0.4, 0], [0.4, 0.4], [0, 0.4]])
+    return kind, [square, square + [rng.uniform(0.3, 0.9), 0]]  # crossing below 0.4: a named refusal
+
+
+def region(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, points: np.ndarray) -> dict:
+    d = len(lo)
+    choice = rng.choice(["box", "half", "ball"])
+    if choice == "box":
+        top = lo[-1] + rng.uniform(0.02, 0.4) * (hi[-1] - lo[-1])
+        return {"box": [list(lo - 1), [*(hi + 1)[:-1], top]]}
+    if choice == "half":
+        n = rng.normal(size=d)
+        centre = (lo + hi) / 2 + 0.3 * (hi - lo) * n / np.linalg.norm(n)
+        return {"halfspace": {"point": centre.tolist(), "normal": n.tolist()}}
+    return {"sphere": {"center": points[rng.integers(len(points))].tolist(), "radius": float(rng.uniform(0.05, 0.5))}}
+
+
+def job(rng: np.random.Generator, geometry: dict, lo: np.ndarray, hi: np.ndarray, points: np.ndarray, dg: bool,
+        precision: str) -> dict:
+    d = len(lo)
+    free = rng.random() < 0.2
+    boundaries = []
+    if not free:  # a clamp across one end
+        axis = int(rng.integers(d))
+        top = list(hi + 1)
+        top[axis] = lo[axis] + rng.uniform(0.03, 0.3) * (hi[axis] - lo[axis])
+        value = [0.0] * d if rng.random() < 0.8 else [float(rng.uniform(-1e-3, 1e-3))] + [0.0] * (d - 1)
+        boundaries.append({"kind": "displacement", "name": "clamp", "region": {"box": [list(lo - 1), top]},
+                           "value": value})
+    for i in range(int(rng.integers(0, 3))):
+        kind = "pressure" if free else str(rng.choice(["displacement", "traction", "pressure"]))
+        if kind == "displacement":  # a value other than the clamp's where both hold: a named refusal
+            value = [float(rng.uniform(-1e-3, 1e-3)) if rng.random() < 0.5 else 0.0 if rng.random() < 0.6 else None
+                     for _ in range(d)]
+            value[0] = 0.0 if all(v is None for v in value) else value[0]
+        elif kind == "traction":
+            value = rng.uniform(-1e3, 1e3, d).tolist()
+        else:
+            value = float(rng.uniform(-1e3, 1e3))
+        b = {"kind": kind, "name": f"b{i}", "region": region(rng, lo, hi, points), "value": value}
+        if rng.random() < 0.2:
+            b["facing"] = {"direction": rng.normal(size=d).tolist(), "max_angle_deg": float(rng.uniform(10, 90))}
+        boundaries.append(b)
+    kind = str(rng.choice(["static", "static", "quasistatic", "dynamic"]))
+    analysis: dict = {"kind": kind}
+    if kind != "static":
+        analysis["steps"] = int(rng.integers(1, 3))
+    if kind == "dynamic":
+        analysis["time_step"] = float(10 ** rng.uniform(-5, -1))
+    fields = [str(f) for f in rng.choice(FIELDS, size=int(rng.integers(1, 5)), replace=False)
+              if f != "velocity" or kind == "dynamic"] or ["displacement"]
+    if dg:
+        method = {"kind": "dg", "degree": int(rng.choice([1, 2])), "flux": str(rng.choice(["ip", "bz"]))}
+    else:
+        method = {"kind": "staggered", "solver": str(rng.choice(["auto", "iterative", "direct"]))}
+    return {"dimension": d, "geometry": geometry, "grid": {"resolution": int(rng.integers(6, 14 if dg else 28))},
+            "method": method,
+            "material": {"youngs_modulus": float(10 ** rng.uniform(3, 11)),
+                         "poisson_ratio": float(rng.choice([0.0, 0.2, 0.3, 0.45, 0.49, 0.4999])),
+                         "density": float(10 ** rng.uniform(1, 4)),
+                         "model": "corotated" if dg and rng.random() < 0.2 else "linear"},
+            "loads": {"gravity": rng.uniform(-10, 10, d).tolist()} if rng.random() < 0.7 and not free else {},
+            "boundaries": boundaries, "analysis": analysis,
+            "solver": {"rtol": 1e-8 if rng.random() < 0.7 else 1e-5, "max_iterations": 3000, "arch": "cpu",
+                       "precision": precision},
+            "output": {"fields": fields, "probes": [((lo + hi) / 2).tolist(), (hi + 0.5).tolist()] if rng.random() < 0.5
+                       else [], "surface": bool(rng.random() < 0.5)}}
+
+
+def draw(seed: int, dimension: int, precision: str, out: Path) -> tuple[str, dict]:
+    rng = np.random.default_rng(seed)
+    if dimension == 3:
+        kind, m = mesh_3d(rng)
+        path = out / f"mesh-{seed}.stl"
+        m.export(path)
+        dg = rng.random() < 0.35 and kind not in ("open", "overlap", "dupes", "degenerate")
+        return kind, job(rng, {"mesh": str(path)}, *m.bounds, m.vertices, dg, precision)
+    kind, loops = loops_2d(rng)
+    points = np.vstack(loops)
+    return kind, job(rng, {"polygon": [loop.tolist() for loop in loops]}, points.min(0), points.max(0), points, False,
+                     precision)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--count", type=int, default=60)
+    ap.add_argument("--dimension", type=int, choices=(2, 3), default=3)
+    ap.add_argument("--precision", choices=("f64", "f32"), default="f64")
+    ap.add_argument("--out", type=Path, default=Path("random-jobs"), help="meshes and findings [folder]")
+    args = ap.parse_args()
+    from engine.errors import VoxelasticError
+    from engine.geometry.cache import GeometryCache
+    from engine.pipeline import Limits, run
+    from schemas.job import SpecError
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    for seed in range(args.seed, args.seed + args.count):
+        kind, spec = draw(seed, args.dimension, args.precision, args.out)
+        label = f"{seed} {kind} {spec['method']['kind']}"
+        try:
+            r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=8 * 2**30))
+        except (VoxelasticError, SpecError) as e:
+            print(label, "refused:", str(e)[:200].replace("\n", " "), flush=True)
+            continue
+        except Exception as e:  # the finding this script looks for
+            print(label, "CRASH", type(e).__name__, str(e)[:200], flush=True)
+            (args.out / f"crash-{seed}.json").write_text(json.dumps(spec))
+            (args.out / f"crash-{seed}.txt").write_text(traceback.format_exc())
+            continue
+        solid = r.volume_fraction > 0
+        bad = sorted({name for level in [r.fields, *r.steps] for name, a in level.cells.items()
+                      if not np.isfinite(a[solid]).all()}
+                     | {f"surface {name}" for level in [r.fields, *r.steps] for name, a in level.surface.items()
+                        if not np.isfinite(a).all()})
+        if bad:
+            (args.out / f"bad-{seed}.json").write_text(json.dumps(spec))
+        print(label, f"BAD {','.join(bad)}" if bad else "ok", r.solver.iterations, f"{r.solver.residual:.1e}",
+              len(r.solver.warnings), flush=True)
+
+
+if __name__ == "__main__":
+    main()
