@@ -6,8 +6,8 @@ element polynomial) says little about sigma n, which the boundary conditions kno
 on a free surface, the applied traction on a loaded patch. Each vertex's stress is therefore the
 symmetric tensor closest to the raw one (Frobenius norm) among those with sigma n = t for the
 facets around it whose traction is known: one condition per face meeting at the vertex (one where
-the surface is smooth, one per side of a sharp edge), with that face's mean normal and traction
-(:func:`recover`). On a flat free face that replaces the normal row of sigma and keeps the in-plane
+the surface is smooth, one per side of a sharp edge), with that face's mean normal and the loads'
+traction at the vertex with that normal (:func:`recover`). On a flat free face that replaces the normal row of sigma and keeps the in-plane
 stresses; at a free edge or corner it zeroes what the faces say. Facets of a displacement patch carry an unknown reaction and add no
 condition.
 """
@@ -31,11 +31,13 @@ FEATURE_ANGLE = 30.0  # degrees: facets around a vertex whose normals differ mor
 @dataclass(frozen=True)
 class FacetTractions:
     """What the boundaries fix of sigma n on each facet of a surface: ``known`` [F] bool (free or
-    loaded; False on displacement patches), ``traction`` [F, d] [Pa] at load scale 1 (zero on free
-    facets), ``normals`` [F, d] unit outward, ``areas`` [F] [m^2 | m]."""
+    loaded; False on displacement patches), the surface ``loads`` and ``members`` [L, F] bool, the
+    known facets in each load's patch (none: a free facet), ``normals`` [F, d] unit outward,
+    ``areas`` [F] [m^2 | m]."""
 
     known: np.ndarray
-    traction: np.ndarray
+    loads: tuple[SurfaceLoad, ...]
+    members: np.ndarray
     normals: np.ndarray
     areas: np.ndarray
 
@@ -43,19 +45,14 @@ class FacetTractions:
 def facet_tractions(surface: Surface, loads: list[SurfaceLoad], prescribed: list[Prescribed]) -> FacetTractions:
     """Classify the facets of ``surface``: a facet belongs to a boundary's patch when at least half
     its area lies in the patch (later loads add to earlier ones, as the methods apply them)."""
-    d = surface.dim
     facets = surface.vertices[surface.faces]
     areas, normals = _measure_and_normal(facets)
-    centroids = facets.mean(axis=1)
     known = np.ones(len(facets), dtype=bool)
-    traction = np.zeros((len(facets), d))
     for bc in prescribed:
         known &= ~_in_patch(bc.region, facets, areas, bc.name)
-    for load in loads:
-        inside = _in_patch(load.region, facets, areas, load.name) & known
-        if inside.any():
-            traction[inside] += load.tractions(centroids[inside], normals[inside])
-    return FacetTractions(known, traction, normals, areas)
+    members = np.array([_in_patch(load.region, facets, areas, load.name) & known for load in loads],
+                       dtype=bool).reshape(len(loads), len(facets))
+    return FacetTractions(known, tuple(loads), members, normals, areas)
 
 
 def _in_patch(region, facets: np.ndarray, areas: np.ndarray, name: str) -> np.ndarray:
@@ -72,7 +69,8 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
 
     The facets around a vertex are grouped into the faces that meet there (:func:`_faces_at`:
     normals within ``feature_angle`` of each other), and each face gives one condition with its
-    mean normal and traction (weighted as in :func:`_normal_weights`). On a smooth surface that is
+    unit mean normal (weighted as in :func:`_normal_weights`) and the loads' traction at the vertex
+    with that normal, each load by its patch's share of the face. On a smooth surface that is
     one condition per vertex; asking it of every facet would pin the tangential stresses too (on a
     facetted sphere under pressure each tilted facet normal adds -p to the hoop stress; at a
     256-gon hole's rim two wall facets 1.4 degrees apart zero it). ``feature_angle`` 0: every facet
@@ -82,7 +80,7 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     m = len(surface.vertices)
     k = tractions.known
     faces = surface.faces[k]
-    normals, t = tractions.normals[k], load_scale * tractions.traction[k]
+    normals = tractions.normals[k]
     corner_v = faces.ravel()  # [F * d]: the vertex of each (facet, corner)
     corner_f = np.repeat(np.arange(len(faces)), d)
     weight = _normal_weights(surface.vertices, faces)
@@ -92,7 +90,9 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     lhs = np.zeros((m, nv, nv))
     rhs = np.zeros((m, nv))
     if len(corner_v):
-        _add_faces(lhs, rhs, corner_v, normals[corner_f], t[corner_f], weight, total, np.cos(np.radians(feature_angle)))
+        members = tractions.members[:, k][:, corner_f]
+        _add_faces(lhs, rhs, surface.vertices, corner_v, normals[corner_f], (tractions.loads, members, load_scale),
+                   weight, total, np.cos(np.radians(feature_angle)))
     # the raw stress in the Frobenius norm (in Voigt slots the shear counts twice)
     metric = np.concatenate([np.ones(d), 2 * np.ones(len(pairs))])
     s_raw = to_voigt(raw)
@@ -104,20 +104,33 @@ def recover(surface: Surface, raw: np.ndarray, tractions: FacetTractions, load_s
     return from_voigt(out, d)
 
 
-def _add_faces(lhs: np.ndarray, rhs: np.ndarray, vertex: np.ndarray, normals: np.ndarray, traction: np.ndarray,
-               weight: np.ndarray, total: np.ndarray, cos_angle: float) -> None:
+def _add_faces(lhs: np.ndarray, rhs: np.ndarray, points: np.ndarray, vertex: np.ndarray, normals: np.ndarray,
+               loads: tuple[tuple[SurfaceLoad, ...], np.ndarray, float], weight: np.ndarray, total: np.ndarray,
+               cos_angle: float) -> None:
     """Add to the vertices' normal equations one condition per face meeting there: the
-    incidences (vertex [N], facet normal [N, d], traction [N, d], weight [N]) grouped by
-    :func:`_faces_at`, each group with its mean normal and traction and its share of the weight."""
+    incidences (vertex [N], facet normal [N, d], weight [N]) grouped by :func:`_faces_at`, each
+    group with its unit mean normal n, its share of the weight and the traction sum_l s_l t_l(x, n):
+    ``loads`` = (the loads, members [L, N] whether each incidence's facet is in load l's patch, the
+    load scale), s_l load l's share of the group's weight, x the vertex (``points`` [m, d]).
+
+    The loads are evaluated at the vertex with n rather than averaged over the facets: a pressure's
+    facet tractions -p n_f average to -p |mean n_f| n, short of -p n by the facets' spread (4e-3 p
+    on an icosphere of 642 vertices, whatever the grid), and sigma n = t then held no uniform state."""
     d = normals.shape[1]
     group = _faces_at(vertex, normals, cos_angle)
     g_w = np.bincount(group, weights=weight).astype(float)
     g_n = np.stack([np.bincount(group, weights=weight * normals[:, j]) for j in range(d)], 1)
-    g_t = np.stack([np.bincount(group, weights=weight * traction[:, j]) for j in range(d)], 1)
     g_v = np.zeros(len(g_w), dtype=np.int64)
     g_v[group] = vertex
     g_n /= np.maximum(np.linalg.norm(g_n, axis=1), 1e-300)[:, None]
-    a_f, b_f = _conditions(g_n, g_t / np.maximum(g_w, 1e-300)[:, None], d)
+    g_t = np.zeros_like(g_n)
+    each, members, scale = loads
+    for load, member in zip(each, members):
+        share = np.bincount(group, weights=weight * member, minlength=len(g_w)) / np.maximum(g_w, 1e-300)
+        on = share > 0
+        if on.any():
+            g_t[on] += scale * share[on, None] * load.tractions(points[g_v[on]], g_n[on])
+    a_f, b_f = _conditions(g_n, g_t, d)
     share = g_w / total[g_v]
     np.add.at(lhs, g_v, STIFF * share[:, None, None] * a_f)
     np.add.at(rhs, g_v, STIFF * share[:, None] * b_f)
