@@ -27,7 +27,8 @@ STEP_REPORT_SECONDS = 0.5
 
 @dataclass
 class AnalysisResult:
-    """final: the last state's fields; steps: one FieldData per step (empty for static runs);
+    """final: the last state's fields; steps: one FieldData per kept step (``output.every``; empty
+    for static runs);
     iterations / residual: of the last solve; total_iterations over all steps; solve_seconds."""
 
     final: FieldData
@@ -46,6 +47,9 @@ def run_analysis(method: Method, analysis, output, progress: Progress, start: fl
     kind = analysis.kind
     steps = 1 if kind == "static" else analysis.steps
     result = AnalysisResult(final=FieldData())
+
+    def kept(k: int) -> bool:  # output.every: steps n, 2n, ... and the last; the others' fields never made
+        return (k + 1) % output.every == 0 or k + 1 == steps
 
     def report(k: int):
         def on_iteration(it: int, residual: float) -> None:
@@ -76,7 +80,8 @@ def run_analysis(method: Method, analysis, output, progress: Progress, start: fl
             state = method.solve(s, s, x0=prev, on_iteration=report(k))
             record(state, k)
             prev = state.u
-            result.steps.append(method.fields(state, names, probes, output.surface, time_value=s))
+            if kept(k):
+                result.steps.append(method.fields(state, names, probes, output.surface, time_value=s))
         result.final = _without_time(result.steps[-1])
     else:
         dt = analysis.time_step
@@ -89,7 +94,9 @@ def run_analysis(method: Method, analysis, output, progress: Progress, start: fl
             record(state, k)
             v = (state.u - (u if u is not None else 0.0)) / dt
             u = state.u
-            result.steps.append(method.fields(state, names, probes, output.surface, time_value=(k + 1) * dt, velocity=v))
+            if kept(k):
+                result.steps.append(method.fields(state, names, probes, output.surface, time_value=(k + 1) * dt,
+                                                  velocity=v))
         result.final = _without_time(result.steps[-1])
     progress("solve", end, {"iterations": result.iterations, "residual": result.residual})
     return result

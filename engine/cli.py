@@ -93,14 +93,14 @@ def _check_room(path: str, shape, fields, *, levels: int = 1, vertices: int = 0,
     if spec.analysis.kind == "static":
         raise _NoRoom(f"grid: the result of a {grid} grid with output.fields [{shown}] {size}; lower "
                       "grid.resolution (or raise grid.cell_size) or output fewer fields")
-    raise _NoRoom(f"analysis.steps: the result of {spec.analysis.steps} steps, each holding output.fields "
-                  f"[{shown}] on a {grid} grid, {size}; lower analysis.steps or grid.resolution (or raise "
-                  "grid.cell_size), or output fewer fields")
+    raise _NoRoom(f"analysis.steps: the result of {spec.kept_steps} steps, each holding output.fields "
+                  f"[{shown}] on a {grid} grid, {size}; keep fewer steps (output.every), lower analysis.steps or "
+                  "grid.resolution (or raise grid.cell_size), or output fewer fields")
 
 
 def _result_levels(spec) -> int:
-    """The states a job's result holds: the final one and one per step of a quasi-static or dynamic job."""
-    return 1 + (spec.analysis.steps if spec.analysis.kind != "static" else 0)
+    """The states a job's result holds: the final one and one per kept step of a quasi-static or dynamic job."""
+    return 1 + spec.kept_steps
 
 
 def _admit(spec, base_dir: Path):

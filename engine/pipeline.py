@@ -79,8 +79,9 @@ def estimate_memory(grid: Grid, method_spec, surface: Surface | None = None, job
 
 def held_steps_bytes(spec: JobSpec, grid: Grid, surface: Surface | None = None) -> int:
     """Memory [bytes] of the states a quasi-static or dynamic run keeps until its result is written:
-    every step's output fields, dense over the grid and on the surface's vertices and the probes
-    (``FieldData``), but the last, which the method's own estimate holds; 0 for a static run."""
+    every kept step's output fields (``JobSpec.kept_steps``), dense over the grid and on the surface's
+    vertices and the probes (``FieldData``), but the last, which the method's own estimate holds; 0
+    for a static run."""
     if spec.analysis.kind == "static":
         return 0
     per_point = sum(max(1, len(components(name, grid.dim))) for name in spec.output.fields)
@@ -88,7 +89,7 @@ def held_steps_bytes(spec: JobSpec, grid: Grid, surface: Surface | None = None) 
     on_surface = per_point - (grid.dim if "velocity" in spec.output.fields else 0)
     vertices = len(surface.vertices) if surface is not None and spec.output.surface else 0
     per_step = (grid.num_cells + len(spec.output.probes)) * per_point + vertices * on_surface
-    return 8 * (spec.analysis.steps - 1) * per_step
+    return 8 * (spec.kept_steps - 1) * per_step
 
 
 def memory_refusal(need: int, limit: int, spec: JobSpec, grid: Grid, surface: Surface | None = None,
@@ -101,10 +102,11 @@ def memory_refusal(need: int, limit: int, spec: JobSpec, grid: Grid, surface: Su
     shape = "x".join(map(str, grid.shape))
     held = held_steps_bytes(spec, grid, surface)
     if 2 * held > need:
-        what = (f"{spec.analysis.steps} steps of output.fields [{', '.join(spec.output.fields)}] on a {shape} grid are "
+        what = (f"{spec.kept_steps} steps of output.fields [{', '.join(spec.output.fields)}] on a {shape} grid are "
                 f"kept until the result is written: {held / 2**30:.2f} GiB of the {need / 2**30:.2f} GiB the job needs "
                 f"with method '{spec.method.kind}'")
-        return ("analysis", "steps"), what, "lower analysis.steps, output fewer fields or increase grid.cell_size"
+        return ("analysis", "steps"), what, ("keep fewer steps (output.every), lower analysis.steps, output fewer "
+                                             "fields or increase grid.cell_size")
     what = f"a {shape} grid needs about {need / 2**30:.2f} GiB for method '{spec.method.kind}'"
     return ("grid",), what, "increase grid.cell_size or lower grid.resolution"
 

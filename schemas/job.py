@@ -390,6 +390,8 @@ class OutputSpec(SpecModel):
     )
     probes: list[Vector] = Field(default_factory=list, description="Points [m] where fields are sampled.")
     surface: Flag = Field(True, description="Write the deformed surface mesh.")
+    every: Integer = Field(1, ge=1, description="Quasi-static and dynamic runs: keep every n-th step in the "
+                           "result (steps n, 2n, ... and always the last); 1 keeps them all.")
 
     @field_validator("fields")
     @classmethod
@@ -438,6 +440,21 @@ class JobSpec(SpecModel):
             raise_at("JobSpec", [(("output", "fields", i), "velocity_static", "'velocity' needs analysis.kind "
                                   f"'dynamic' (a {self.analysis.kind} state has none)", "velocity")])
         return self
+
+    @model_validator(mode="after")
+    def _every_is_stepped(self) -> JobSpec:
+        if self.output.every != 1 and self.analysis.kind == "static":
+            raise_at("JobSpec", [(("output", "every"), "every_static", "keeps every n-th step of a quasi-static or "
+                                  "dynamic run; a static run has one state (leave it at 1)", self.output.every)])
+        return self
+
+    @property
+    def kept_steps(self) -> int:
+        """How many steps the result keeps: every ``output.every``-th of a quasi-static or dynamic
+        run and its last; 0 for a static run (its result holds the final state alone)."""
+        if self.analysis.kind == "static":
+            return 0
+        return -(-self.analysis.steps // self.output.every)
 
     @model_validator(mode="after")
     def _body_force_in_range(self) -> JobSpec:

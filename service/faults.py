@@ -104,8 +104,9 @@ def result_estimate(spec_json: str, grid_shape: tuple[int, ...], triangles: int)
 
     spec = json.loads(spec_json)
     analysis = spec.get("analysis", {})
-    steps = int(analysis.get("steps", 0)) if analysis.get("kind") != "static" else 0
     output = spec.get("output", {})
+    # the steps the result keeps (schemas.JobSpec.kept_steps)
+    steps = -(-int(analysis.get("steps", 0)) // int(output.get("every", 1))) if analysis.get("kind") != "static" else 0
     # a closed triangle mesh has about half as many vertices as facets
     vertices = triangles // 2 + 3 if output.get("surface", True) else 0
     return estimate_result_bytes(grid_shape, output.get("fields", []), levels=steps + 1,

@@ -48,8 +48,9 @@ def test_validate_and_run_name_analysis_steps_when_the_result_has_no_room(tmp_pa
     monkeypatch.setattr(cli.shutil, "disk_usage", lambda path: usage._replace(free=0))
     need = estimate_result_bytes((14, 5, 5), ["displacement", "von_mises"], levels=41)
     expected = (f"error: analysis.steps: the result of 40 steps, each holding output.fields [displacement, von_mises] "
-                f"on a 14x5x5 grid, may need up to {need / 2**20:.1f} MiB, and '{tmp_path}' has 0.0 MiB free; lower "
-                "analysis.steps or grid.resolution (or raise grid.cell_size), or output fewer fields")
+                f"on a 14x5x5 grid, may need up to {need / 2**20:.1f} MiB, and '{tmp_path}' has 0.0 MiB free; keep fewer "
+                "steps (output.every), lower analysis.steps or grid.resolution (or raise grid.cell_size), or output "
+                "fewer fields")
     assert cli.main(["validate", str(job), "-o", str(tmp_path / "r.h5")]) == 2
     assert capsys.readouterr().err.strip() == expected
     assert cli.main(["run", str(job), "-o", str(tmp_path / "r.h5"), "--no-cache"]) == 2
