@@ -1,7 +1,8 @@
 """The largest von Mises stress of a result, on the surface and in the volume, with where and when.
 
 Engineers judge a part by its peak stress, usually on the surface. Volume values are the cell
-centres' (the cell's own strain; a cut cell's centre may lie just outside the solid), surface
+centres' (the cell's own strain) over the cells at least half solid (a cut cell's centre may lie
+beyond the surface, where its value is an extrapolation; :func:`_centre_in_solid`), surface
 values the recovered stresses at the surface vertices (``engine.surface_stress``), carried over
 the surface refined to the cell size as the viewer files show it. Over a time series the peak of
 every level counts, with the level's time.
@@ -63,6 +64,8 @@ def _level_peak(result: Result, level: FieldData, where: str, lame: tuple[float,
         return None
     if where == "surface":
         vm, points = _on_refined_surface(result, level, vm, lame)
+    else:
+        vm = np.where(_centre_in_solid(result.volume_fraction), vm, np.nan)
     flat = vm.reshape(-1)
     if not np.isfinite(flat).any():
         return None
@@ -73,6 +76,15 @@ def _level_peak(result: Result, level: FieldData, where: str, lame: tuple[float,
         index = np.array(np.unravel_index(i, vm.shape), dtype=float)
         location = np.asarray(result.grid.origin, dtype=float) + (index + 0.5) * result.grid.spacing
     return Peak(float(flat[i]), tuple(float(v) for v in location), level.time)
+
+
+def _centre_in_solid(fraction: np.ndarray) -> np.ndarray:
+    """Cells [*grid.shape] bool whose value counts for the volume peak: at least half solid, so that
+    the centre where the value is taken lies in the solid, not beyond its surface where a cut cell's
+    strain is extrapolated (a pulled cylinder at h = R / 10: a cell of fill 0.009 showed 2.41 times the
+    uniform stress). The surface peak covers the surface itself. Where no cell is half solid (a plate
+    thinner than half a cell), the fullest cells count."""
+    return fraction >= min(0.5, float(np.max(fraction)))
 
 
 def _on_refined_surface(result: Result, level: FieldData, vertex_vm: np.ndarray,

@@ -181,7 +181,7 @@ def test_the_peak_is_reported_in_the_result_file_and_sits_where_the_stress_is_la
     found = peaks(result)
     assert set(found) == {"surface", "volume"}
     cells = result.fields.cells["von_mises"]
-    assert found["volume"].value == pytest.approx(np.nanmax(cells), rel=1e-12)
+    assert found["volume"].value == pytest.approx(np.nanmax(cells[result.volume_fraction >= 0.5]), rel=1e-12)
     assert found["surface"].value >= np.nanmax(result.fields.surface["von_mises"]) * (1 - 1e-12)
     assert found["surface"].location[0] < 0.5 and found["volume"].location[0] < 0.5  # near the root
     # beam theory at the root: M c / I = (1e3 * 0.25) * 2 * 0.25 / (0.5^4 / 12) = 2.4e4 Pa
@@ -245,3 +245,27 @@ def test_a_free_torus_under_pressure_is_hydrostatic_in_its_cells_and_on_its_face
     surface = result.fields.surface["stress"]
     np.testing.assert_allclose(surface, np.broadcast_to(want, surface.shape), atol=1e-6 * p)
     np.testing.assert_allclose(result.fields.surface["pressure"], p, rtol=1e-6)
+
+
+@pytest.mark.parametrize("method", [STAGGERED, DG1], ids=["staggered", "dg1"])
+def test_the_volume_peak_of_a_uniform_pull_is_not_a_sliver_cells_extrapolation(method):
+    """A cylinder pulled by T on its end caps is at sigma_zz = T everywhere. Staggered cut cells of fill
+    down to 0.009 where the caps meet the side extrapolate their strain to centres beyond the surface
+    (2.41 T in one); the volume peak counts the cells at least half solid (1.094 T measured: the
+    staggered stress near a loaded cap's rim is still some 10% off at this size). DG: T to round-off."""
+    cylinder = trimesh.creation.cylinder(radius=0.25, height=1.2, sections=32)
+    t = 1e3
+    ends = [{"kind": "traction", "name": f"end{s}", "region": {"halfspace": {"point": [0, 0, 0.55 * s], "normal": [0, 0, -s]}},
+             "facing": {"direction": [0, 0, s], "max_angle_deg": 5}, "value": [0, 0, s * t]} for s in (1, -1)]
+    spec = {"geometry": {"mesh": "cylinder.stl"}, "grid": {"resolution": 48 if method is STAGGERED else 10},
+            "method": method, "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3}, "boundaries": ends,
+            "solver": {"rtol": 1e-12}, "output": {"fields": ["von_mises"], "surface": True}}
+    result = simulate(spec, cylinder.export(file_type="stl"), filename="cylinder.stl", cache=GeometryCache(None))
+    found = peaks(result)
+    if method is STAGGERED:
+        assert np.nanmax(result.fields.cells["von_mises"]) > 2 * t  # the slivers' values stay in the field
+        assert found["volume"].value < 1.15 * t, found["volume"].value
+        assert found["surface"].value < 1.05 * t, found["surface"].value
+    else:
+        assert found["volume"].value == pytest.approx(t, rel=1e-9)
+        assert found["surface"].value == pytest.approx(t, rel=1e-6)
