@@ -17,6 +17,17 @@ Every job runs in this one process (Taichi is initialised once: ``--precision`` 
 
 Prints one line per job: ``ok`` with the iterations, residual and warnings' count, ``refused:``
 with the named error, or ``CRASH`` / ``BAD`` (written with its spec and traceback to ``--out``).
+
+``--oracle hydrostatic`` keeps each draw's geometry, method and material but makes it a free body
+under one pressure on its whole surface, static or quasi-static, f64, rtol 1e-12, DG with the IP
+flux (Babuska-Zlamal's has no consistency term: the exact state is not its solution): sigma = -p I
+exactly, whatever the shape. At the probes inside and on the surface the stress must be -p I within
+``ORACLE_TOLERANCE`` (relative to p), in the cells at least half solid within ``CELL_TOLERANCE``,
+else ``WRONG`` with the largest errors; the emptier cells' worst is printed as ``slivers``. The
+staggered cells' tolerance is wider by design: control volumes below MIN_FRACTION weigh
+MIN_FRACTION, and faces held only by edge weights at convex corners are dropped, each a local
+change of the energy that an affine state feels (measured up to 3e-4 p in cells at least half solid,
+2e-2 p in slivers of fill 3e-4; 3e-8 with neither); so is the corotated model's (COROTATED_TOLERANCE).
 """
 
 from __future__ import annotations
@@ -164,6 +175,49 @@ def job(rng: np.random.Generator, geometry: dict, lo: np.ndarray, hi: np.ndarray
                        else [], "surface": bool(rng.random() < 0.5)}}
 
 
+ORACLE_TOLERANCE = 1e-6  # the surface's recovery holds its conditions to ~1e-8 (their weight 1e8)
+CELL_TOLERANCE = {"staggered": 1e-3, "dg": 1e-6}
+# corotated DG: sym(R^T F) - I carries the polar factor's round-off (~1e-15) against strains of p / E,
+# down to 1e-9 in these draws (3e-6 of p measured)
+COROTATED_TOLERANCE = 1e-4
+
+
+def hydrostatic(spec: dict, rng: np.random.Generator) -> tuple[dict, float]:
+    """``spec`` as a free body under pressure p on all of its surface (the oracle's job) and p [Pa]."""
+    p = float(rng.uniform(-1e3, 1e3))
+    everywhere = {"box": [[-1e3] * spec["dimension"], [1e3] * spec["dimension"]]}
+    analysis = {"kind": "quasistatic", "steps": 2} if spec["analysis"]["kind"] == "quasistatic" else {"kind": "static"}
+    method = {**spec["method"], "flux": "ip"} if spec["method"]["kind"] == "dg" else spec["method"]
+    return {**spec, "boundaries": [{"kind": "pressure", "name": "all", "region": everywhere, "value": p}],
+            "method": method, "loads": {}, "analysis": analysis,
+            "solver": {**spec["solver"], "rtol": 1e-12, "precision": "f64"},
+            "output": {**spec["output"], "fields": ["stress", "pressure"], "surface": True}}, p
+
+
+def oracle_errors(r, p: float) -> dict[str, float]:
+    """The largest deviation of each stress the result holds from -p I (at the load scale of its
+    level), relative to |p|: cells at least half solid, the other cells ("slivers"), probes inside
+    the solid, surface vertices."""
+    d = r.grid.dim
+    half = (r.volume_fraction >= 0.5).reshape(-1)
+    worst: dict[str, float] = {}
+    for level in r.steps or [r.fields]:
+        scale = level.time if level.time is not None else 1.0
+        want = np.concatenate([np.full(d, -p * scale), np.zeros(3 if d == 3 else 1)])
+        parts = {"cells": (level.cells, half), "slivers": (level.cells, ~half), "probes": (level.probes, None),
+                 "surface": (level.surface, None)}
+        for where, (arrays, keep) in parts.items():
+            a = arrays.get("stress")
+            if a is None:
+                continue
+            a = a.reshape(-1, len(want))
+            a = a if keep is None else a[keep]
+            a = a[np.isfinite(a).all(axis=1)]
+            if len(a):
+                worst[where] = max(worst.get(where, 0.0), float(np.abs(a - want).max()) / abs(p))
+    return worst
+
+
 def draw(seed: int, dimension: int, precision: str, out: Path) -> tuple[str, dict]:
     rng = np.random.default_rng(seed)
     if dimension == 3:
@@ -185,6 +239,7 @@ def main() -> None:
     ap.add_argument("--dimension", type=int, choices=(2, 3), default=3)
     ap.add_argument("--precision", choices=("f64", "f32"), default="f64")
     ap.add_argument("--out", type=Path, default=Path("random-jobs"), help="meshes and findings [folder]")
+    ap.add_argument("--oracle", choices=("hydrostatic",), help="check each result against an exact state")
     args = ap.parse_args()
     from engine.errors import VoxelasticError
     from engine.geometry.cache import GeometryCache
@@ -194,6 +249,8 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     for seed in range(args.seed, args.seed + args.count):
         kind, spec = draw(seed, args.dimension, args.precision, args.out)
+        if args.oracle:
+            spec, p = hydrostatic(spec, np.random.default_rng([seed, 1]))
         label = f"{seed} {kind} {spec['method']['kind']}"
         try:
             r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=8 * 2**30))
@@ -210,10 +267,19 @@ def main() -> None:
                       if not np.isfinite(a[solid]).all()}
                      | {f"surface {name}" for level in [r.fields, *r.steps] for name, a in level.surface.items()
                         if not np.isfinite(a).all()})
+        if args.oracle:
+            worst = oracle_errors(r, p)
+            limits = {"cells": CELL_TOLERANCE[spec["method"]["kind"]], "probes": ORACLE_TOLERANCE,
+                      "surface": ORACLE_TOLERANCE}
+            if spec["material"].get("model") == "corotated":
+                limits = dict.fromkeys(limits, COROTATED_TOLERANCE)
+            if any(worst.get(k, 0.0) > v for k, v in limits.items()):
+                bad.append("WRONG")
         if bad:
             (args.out / f"bad-{seed}.json").write_text(json.dumps(spec))
+        shown = " ".join(f"{k} {v:.1e}" for k, v in worst.items()) if args.oracle else ""
         print(label, f"BAD {','.join(bad)}" if bad else "ok", r.solver.iterations, f"{r.solver.residual:.1e}",
-              len(r.solver.warnings), flush=True)
+              len(r.solver.warnings), shown, flush=True)
 
 
 if __name__ == "__main__":

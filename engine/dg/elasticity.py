@@ -321,8 +321,9 @@ class DGElasticity(BoundaryTerms, Fields):
             return self._linear_solve(load_scale, value_scale, inertia)
 
         start = np.zeros((self.elements.count, 3, self.n)) if self._last_u is None else self._last_u
+        reference = float(np.linalg.norm(warping.reference_state(self.elements, self.basis)))
         try:
-            state = warping.solve_corotated(warped_solve, start, self._gradients, on_iteration, t0)
+            state = warping.solve_corotated(warped_solve, start, self._gradients, on_iteration, t0, reference)
         except warping.CorotatedDiverged:
             self.release_solver()  # the job ends here: its factor need not wait for the method to go
             raise

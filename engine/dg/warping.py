@@ -27,6 +27,10 @@ from .elements import Elements
 from .integrals import Basis
 
 COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per iteration
+# ... or a change of u under this many eps ||X0||: the warped forces R K (R^T x - X0) round R^T x - X0 off
+# by about eps |X0|, so a body strained 1e-8 (a stiff part under a light load) changed u by 1e-7 of
+# itself in every iteration (steps of 0.4-1.3 eps ||X0||, rotations within 5e-15 of I) and was refused
+ROUNDOFF_STEPS = 100.0
 COROTATED_MAX = 100
 OMEGA_RANGE = (0.05, 2.0)  # the relaxation factor's bounds: some progress, at most twice the step
 
@@ -117,11 +121,13 @@ DIVERGED_AFTER = 5
 
 
 def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.ndarray,
-                    on_iteration: Callable[[int, float], None] | None, t0: float) -> State:
+                    on_iteration: Callable[[int, float], None] | None, t0: float, reference: float = 0.0) -> State:
     """Fixed point of rotations and displacement from ``start`` [E, 3, n]: u -> rotations(u) ->
-    ``warped_solve`` until u changes by less than COROTATED_TOL (relative); iterations = linear
+    ``warped_solve`` until u changes by less than COROTATED_TOL (relative) or by less than
+    ROUNDOFF_STEPS eps ``reference`` (||X0||, :func:`reference_state`'s norm [m]); iterations = linear
     solves, ``on_iteration(i, residual)`` after each. t0: when the solve began (perf_counter [s]).
     Raises CorotatedDiverged when the changes grow, VoxelasticError after COROTATED_MAX."""
+    floor = ROUNDOFF_STEPS * np.finfo(float).eps * reference
     u = start
     history: list[float] = []
     changes: list[float] = []
@@ -143,7 +149,7 @@ def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.
         changes.append(change)
         if on_iteration is not None:
             on_iteration(it, residual)
-        if change < COROTATED_TOL:
+        if change < COROTATED_TOL or np.linalg.norm(step) <= floor:
             u = new
             break
         u = u + omega * step
