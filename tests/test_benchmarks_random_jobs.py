@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from benchmarks.random_jobs import draw, hydrostatic, oracle_errors
+from benchmarks.random_jobs import ORACLES, draw, oracle_errors
 from engine.geometry.cache import GeometryCache
 from engine.pipeline import run
 from schemas import parse_job
@@ -22,22 +22,24 @@ def test_every_drawn_job_is_a_valid_spec_and_the_draws_differ(tmp_path, dimensio
         assert {spec["method"]["kind"] for spec in specs} == {"staggered", "dg"}
 
 
-def test_the_hydrostatic_oracle_passes_an_exact_state_and_catches_a_wrong_one(tmp_path):
-    """The oracle's jobs are valid free bodies under one pressure, with the IP flux; a solved one is
-    -p I to round-off in its cells, and the same result read against another pressure is not."""
+@pytest.mark.parametrize("oracle", sorted(ORACLES))
+def test_an_oracle_passes_an_exact_state_and_catches_a_wrong_one(tmp_path, oracle):
+    """The oracles' jobs are valid, held or loaded on their whole surface alone, with the IP flux; a
+    solved one is exact to round-off, and the same result read against other values is not."""
     for seed in range(20):
-        spec, p = hydrostatic(draw(seed, 3, "f64", tmp_path)[1], np.random.default_rng(seed))
+        spec, _ = ORACLES[oracle](draw(seed, 3, "f64", tmp_path)[1], np.random.default_rng(seed))
         parse_job(spec)
-        assert spec["boundaries"][0]["kind"] == "pressure" and spec["analysis"]["kind"] in ("static", "quasistatic")
-        assert spec["method"].get("flux", "ip") == "ip"
+        assert len(spec["boundaries"]) == 1 and spec["analysis"]["kind"] in ("static", "quasistatic")
+        assert spec["method"].get("flux", "ip") == "ip" and not spec["loads"]
     box = tmp_path / "box.stl"
     trimesh.creation.box(extents=[1.0, 0.6, 0.4]).export(box)
     base = {"dimension": 3, "geometry": {"mesh": str(box)}, "grid": {"resolution": 8},
             "method": {"kind": "staggered"}, "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3},
             "analysis": {"kind": "quasistatic", "steps": 2}, "solver": {"rtol": 1e-8, "precision": "f64"},
             "output": {"fields": ["displacement"], "probes": [[0, 0, 0]]}}
-    spec, p = hydrostatic(base, np.random.default_rng(0))
+    spec, wanted = ORACLES[oracle](base, np.random.default_rng(0))
     r = run(spec, cache=GeometryCache(None))
-    worst = oracle_errors(r, p)
-    assert {"cells", "probes", "surface"} <= set(worst) and max(worst.values()) < 1e-9, worst
-    assert min(oracle_errors(r, 1.01 * p).values()) > 5e-3
+    worst = oracle_errors(r, wanted)
+    assert {"cells", "probes", "surface"} <= set(worst) and max(worst.values()) < 1e-8, worst
+    off = {name: (1.01 * value + 0.01 * scale, scale) for name, (value, scale) in wanted.items()}
+    assert min(oracle_errors(r, off).values()) > 5e-3

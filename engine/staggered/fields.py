@@ -114,6 +114,7 @@ class StaggeredFields(SurfaceStress):
         eye = np.eye(d, dtype=int)
         normal = [(_shifted(full[a], eye[a], shape) - full[a][cut]) / h for a in range(d)]
         shear = {}
+        unheld = np.zeros(tuple(shape), dtype=bool)  # cells with a shear no edge's energy determines
         for q, (a, b) in enumerate(axis_pairs(d)):
             ua, ub = full[a], full[b]
             inner = tuple(slice(1, None) if k in (a, b) else slice(None) for k in range(d))
@@ -125,15 +126,22 @@ class StaggeredFields(SurfaceStress):
             den = sum(_shifted(w, o, shape) for o in corners)
             plain = sum(_shifted(edge, o, shape) for o in corners) / 4
             shear[(a, b)] = np.where(den > 0, num / np.where(den > 0, den, 1.0), plain)
+            unheld |= den == 0
         order = [(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)]
         strain = np.where(self._solid()[..., None], np.stack(normal + [shear[p] for p in order], axis=-1), np.nan)
         # a cut cell's own strain reads samples outside the solid that only its sliver of energy
-        # determines: its value is the fit of its neighbourhood, weighted to the material
+        # determines: its value is the fit of its neighbourhood, weighted to the material. A sliver
+        # none of whose edges of a pair holds material has that shear from faces that are no
+        # unknowns (zero): it is no data for the fit (a body held at a constant c had strains of
+        # c / h there, and 2.6e-3 E |c| / m on its surface through the fit)
         trust = self._trust()
         cut_cells = np.argwhere((trust > 0) & (trust < 1))
         if len(cut_cells):
             centres = np.asarray(self.grid.origin) + (cut_cells + 0.5) * h
-            strain[tuple(cut_cells.T)] = fit_strain(self.grid, strain, trust, centres)
+            data = np.where(unheld[..., None], np.nan, strain)
+            fitted = fit_strain(self.grid, data, trust, centres)
+            found = np.isfinite(fitted).all(axis=1)  # else (nothing fit within reach) the cell's own
+            strain[tuple(cut_cells[found].T)] = fitted[found]
         return strain
 
 
