@@ -22,7 +22,8 @@ with the named error, or ``CRASH`` / ``BAD`` (written with its spec and tracebac
 under one pressure on its whole surface, static or quasi-static, f64, rtol 1e-12, DG with the IP
 flux (Babuska-Zlamal's has no consistency term: the exact state is not its solution): sigma = -p I
 exactly, whatever the shape. ``--oracle translation``: the body held at one displacement c on its
-whole surface, u = c and no stress. At the probes inside and on the surface the fields must be
+whole surface, u = c and no stress; ``--oracle shift``: held by the draw's clamp alone (its patch,
+a component sometimes free) at c, no loads, u = c (0 in the free component) and no stress. At the probes inside and on the surface the fields must be
 exact within ``ORACLE_TOLERANCE`` (relative to p, or to |c| and E |c| / 1 m), and in every cell, else ``WRONG``
 with the largest errors (cells at least half solid and the emptier ones, ``slivers``, apart). The
 corotated model's tolerance is wider (COROTATED_TOLERANCE).
@@ -190,7 +191,7 @@ def _oracle_job(spec: dict, boundary: dict, fields: list[str]) -> dict:
             "output": {**spec["output"], "fields": fields, "surface": True}}
 
 
-def hydrostatic(spec: dict, rng: np.random.Generator) -> tuple[dict, dict]:
+def hydrostatic(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict]:
     """A free body under pressure p on all of its surface, and what it must give: sigma = -p I
     ({field: (value [c] at load scale 1, the scale errors are relative to)})."""
     p = float(rng.uniform(-1e3, 1e3))
@@ -199,7 +200,7 @@ def hydrostatic(spec: dict, rng: np.random.Generator) -> tuple[dict, dict]:
     return _oracle_job(spec, {"kind": "pressure", "value": p}, ["stress", "pressure"]), {"stress": (want, abs(p))}
 
 
-def translation(spec: dict, rng: np.random.Generator) -> tuple[dict, dict]:
+def translation(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict]:
     """A body held at displacement c on all of its surface, and what it must give: u = c, no stress
     (relative to E |c| / 1 m, the stress of a strain |c| / L on the draws' bodies of about a metre)."""
     c = rng.uniform(-1e-3, 1e-3, spec["dimension"])
@@ -209,7 +210,27 @@ def translation(spec: dict, rng: np.random.Generator) -> tuple[dict, dict]:
     return job, {"displacement": (c, float(np.linalg.norm(c))), "stress": (np.zeros(6 if d == 3 else 3), stress)}
 
 
-ORACLES = {"hydrostatic": hydrostatic, "translation": translation}
+def shift(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict] | None:
+    """The draw's first displacement boundary alone, at one value c (a component free, null, one time
+    in three), no loads: every body it holds moves by c (0 in a free component: the rigid motion
+    left is the one orthogonal to the free modes), unstrained. None when the draw (of mesh ``kind``)
+    holds nothing or may have two bodies (a free one would stay)."""
+    held = [b for b in spec["boundaries"] if b["kind"] == "displacement"]
+    if not held or kind == "two" or spec["dimension"] == 2:
+        return None
+    d = spec["dimension"]
+    c = rng.uniform(-1e-3, 1e-3, d)
+    value: list = c.tolist()
+    if rng.random() < 1 / 3:
+        value[int(rng.integers(d))] = None
+    want = np.array([0.0 if v is None else v for v in value])
+    job = _oracle_job(spec, {**held[0], "value": value}, ["displacement", "stress"])
+    job["boundaries"][0]["region"] = held[0]["region"]
+    stress = spec["material"]["youngs_modulus"] * float(np.linalg.norm(c))
+    return job, {"displacement": (want, float(np.linalg.norm(c))), "stress": (np.zeros(6), stress)}
+
+
+ORACLES = {"hydrostatic": hydrostatic, "translation": translation, "shift": shift}
 
 
 def oracle_errors(r, wanted: dict) -> dict[str, float]:
@@ -268,7 +289,10 @@ def main() -> None:
     for seed in range(args.seed, args.seed + args.count):
         kind, spec = draw(seed, args.dimension, args.precision, args.out)
         if args.oracle:
-            spec, wanted = ORACLES[args.oracle](spec, np.random.default_rng([seed, 1]))
+            made = ORACLES[args.oracle](spec, np.random.default_rng([seed, 1]), kind)
+            if made is None:
+                continue
+            spec, wanted = made
         label = f"{seed} {kind} {spec['method']['kind']}"
         try:
             r = run(spec, cache=GeometryCache(None), limits=Limits(max_memory_bytes=8 * 2**30))

@@ -305,9 +305,11 @@ class DGElasticity(BoundaryTerms, Fields):
         if self.material.model == "corotated":
             state = self._solve_corotated(load_scale, value_scale, inertia, on_iteration, t0)
             state.load_scale = load_scale  # the surface stress carries this share of the loads
-            return state
-        u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration, x0)
-        return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
+        else:
+            u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration, x0)
+            state = State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
+        self.warnings.extend(w for w in state.stats.warnings if w not in self.warnings)
+        return state
 
     def _solve_corotated(self, load_scale: float, value_scale: float, inertia: np.ndarray | None,
                          on_iteration: Callable[[int, float], None] | None, t0: float) -> State:

@@ -31,6 +31,13 @@ COROTATED_TOL = 1e-8  # fixed point of the rotations: relative change of u per i
 # by about eps |X0|, so a body strained 1e-8 (a stiff part under a light load) changed u by 1e-7 of
 # itself in every iteration (steps of 0.4-1.3 eps ||X0||, rotations within 5e-15 of I) and was refused
 ROUNDOFF_STEPS = 100.0
+# ... or a stall (no new smallest change for DIVERGED_AFTER iterations) after a change under this one:
+# the iterate of that change is the fixed point to about that change. Free thin plates at nu 0.4999
+# under pressure stall there: round-off amplified by the solve (rotations 2e-12 from I, u changing by
+# 1e-7 to 7e-7 of itself, 40x the ROUNDOFF_STEPS floor), or a fixed point the iteration leaves from
+# 1e-6 on (changes growing 1.4-1.7x per iteration, under tension too: the interface penalty's lambda
+# turns the rotations' noise into forces), both refused before as a load step too large
+STALL_ACCEPT = 1e-6
 COROTATED_MAX = 100
 OMEGA_RANGE = (0.05, 2.0)  # the relaxation factor's bounds: some progress, at most twice the step
 
@@ -124,7 +131,8 @@ def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.
                     on_iteration: Callable[[int, float], None] | None, t0: float, reference: float = 0.0) -> State:
     """Fixed point of rotations and displacement from ``start`` [E, 3, n]: u -> rotations(u) ->
     ``warped_solve`` until u changes by less than COROTATED_TOL (relative) or by less than
-    ROUNDOFF_STEPS eps ``reference`` (||X0||, :func:`reference_state`'s norm [m]); iterations = linear
+    ROUNDOFF_STEPS eps ``reference`` (||X0||, :func:`reference_state`'s norm [m]), or the changes
+    stall after one under STALL_ACCEPT (then the iterate of that one is returned); iterations = linear
     solves, ``on_iteration(i, residual)`` after each. t0: when the solve began (perf_counter [s]).
     Raises CorotatedDiverged when the changes grow, VoxelasticError after COROTATED_MAX."""
     floor = ROUNDOFF_STEPS * np.finfo(float).eps * reference
@@ -132,6 +140,7 @@ def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.
     history: list[float] = []
     changes: list[float] = []
     step, omega = None, 1.0
+    best: tuple[float, np.ndarray, float] | None = None  # (change, u, residual) of the smallest change
     for it in range(1, COROTATED_MAX + 1):
         new, stats = warped_solve(rotations(u, gradients))
         residual = stats.residual
@@ -149,8 +158,13 @@ def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.
         changes.append(change)
         if on_iteration is not None:
             on_iteration(it, residual)
+        if best is None or change < best[0]:
+            best = (change, new, residual)
         if change < COROTATED_TOL or np.linalg.norm(step) <= floor:
             u = new
+            break
+        if _stalled(changes) and best[0] < STALL_ACCEPT:  # the iterate nearest the fixed point
+            _, u, residual = best
             break
         u = u + omega * step
         if _diverged(changes, COROTATED_TOL):
@@ -168,11 +182,12 @@ def solve_corotated(warped_solve: WarpedSolve, start: np.ndarray, gradients: np.
     return State(u, SolveStats(it, residual, history, seconds=seconds), seconds, rotations=rotations(u, gradients))
 
 
+def _stalled(changes: list[float]) -> bool:
+    """No new smallest change for DIVERGED_AFTER iterations."""
+    return len(changes) > DIVERGED_AFTER and min(changes[-DIVERGED_AFTER:]) >= min(changes[:-DIVERGED_AFTER])
+
+
 def _diverged(changes: list[float], tol: float) -> bool:
-    """No new smallest change for DIVERGED_AFTER iterations, far above the tolerance (a stall
-    near the tolerance is round-off, not divergence: it is left to the iteration limit)."""
-    if len(changes) <= DIVERGED_AFTER:
-        return False
-    before, recent = min(changes[:-DIVERGED_AFTER]), changes[-DIVERGED_AFTER:]
-    return min(recent) >= before and min(recent) > 1e4 * tol
+    """A stall far above the tolerance (one near it is round-off, not divergence: STALL_ACCEPT)."""
+    return _stalled(changes) and min(changes[-DIVERGED_AFTER:]) > 1e4 * tol
 
