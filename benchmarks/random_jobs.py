@@ -24,7 +24,7 @@ flux (Babuska-Zlamal's has no consistency term: the exact state is not its solut
 exactly, whatever the shape. ``--oracle translation``: the body held at one displacement c on its
 whole surface, u = c and no stress; ``--oracle shift``: held by the draw's clamp alone (its patch,
 a component sometimes free) at c, no loads, u = c (0 in the free component) and no stress. At the probes inside and on the surface the fields must be
-exact within ``ORACLE_TOLERANCE`` (relative to p, or to |c| and E |c| / 1 m), and in every cell, else ``WRONG``
+exact within ``ORACLE_TOLERANCE`` (relative to p, or to |c| and (lambda + 2 mu) |c| / 1 m), and in every cell, else ``WRONG``
 with the largest errors (cells at least half solid and the emptier ones, ``slivers``, apart). The
 corotated model's tolerance is wider (COROTATED_TOLERANCE).
 """
@@ -202,12 +202,13 @@ def hydrostatic(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[d
 
 def translation(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict]:
     """A body held at displacement c on all of its surface, and what it must give: u = c, no stress
-    (relative to E |c| / 1 m, the stress of a strain |c| / L on the draws' bodies of about a metre)."""
+    (relative to (lambda + 2 mu) |c| / 1 m, the stress of a strain |c| / L on the draws' bodies of
+    about a metre)."""
     c = rng.uniform(-1e-3, 1e-3, spec["dimension"])
     d = spec["dimension"]
     job = _oracle_job(spec, {"kind": "displacement", "value": c.tolist()}, ["displacement", "stress"])
-    stress = spec["material"]["youngs_modulus"] * float(np.linalg.norm(c))
-    return job, {"displacement": (c, float(np.linalg.norm(c))), "stress": (np.zeros(6 if d == 3 else 3), stress)}
+    return job, {"displacement": (c, float(np.linalg.norm(c))),
+                 "stress": (np.zeros(6 if d == 3 else 3), _p_modulus(spec) * float(np.linalg.norm(c)))}
 
 
 def shift(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict] | None:
@@ -226,8 +227,15 @@ def shift(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, d
     want = np.array([0.0 if v is None else v for v in value])
     job = _oracle_job(spec, {**held[0], "value": value}, ["displacement", "stress"])
     job["boundaries"][0]["region"] = held[0]["region"]
-    stress = spec["material"]["youngs_modulus"] * float(np.linalg.norm(c))
-    return job, {"displacement": (want, float(np.linalg.norm(c))), "stress": (np.zeros(6), stress)}
+    return job, {"displacement": (want, float(np.linalg.norm(c))),
+                 "stress": (np.zeros(6), _p_modulus(spec) * float(np.linalg.norm(c)))}
+
+
+def _p_modulus(spec: dict) -> float:
+    """lambda + 2 mu [Pa] of the draw's material: the stress of a unit strain, what round-off in the
+    displacement turns into (1667 E at nu 0.4999)."""
+    e, nu = spec["material"]["youngs_modulus"], spec["material"]["poisson_ratio"]
+    return e * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
 
 
 ORACLES = {"hydrostatic": hydrostatic, "translation": translation, "shift": shift}
