@@ -23,8 +23,9 @@ under one pressure on its whole surface, static or quasi-static, f64, rtol 1e-12
 flux (Babuska-Zlamal's has no consistency term: the exact state is not its solution): sigma = -p I
 exactly, whatever the shape. ``--oracle translation``: the body held at one displacement c on its
 whole surface, u = c and no stress; ``--oracle shift``: held by the draw's clamp alone (its patch,
-a component sometimes free) at c, no loads, u = c (0 in the free component) and no stress. At the probes inside and on the surface the fields must be
-exact within ``ORACLE_TOLERANCE`` (relative to p, or to |c| and (lambda + 2 mu) |c| / 1 m), and in every cell, else ``WRONG``
+a component sometimes free) at c, no loads, u = c (0 in the free component) and no stress. In
+every cell, at the probes inside and on the surface the fields must be exact within
+``ORACLE_TOLERANCE`` (relative to p, or to |c| and (lambda + 2 mu) |c| / 1 m), else ``WRONG``
 with the largest errors (cells at least half solid and the emptier ones, ``slivers``, apart). The
 corotated model's tolerance is wider (COROTATED_TOLERANCE).
 """
@@ -181,12 +182,12 @@ COROTATED_TOLERANCE = 1e-4
 
 
 def _oracle_job(spec: dict, boundary: dict, fields: list[str]) -> dict:
-    """``spec`` held or loaded by ``boundary`` alone on all of its surface: no gravity, static or
-    quasi-static, f64, rtol 1e-12, DG with the IP flux."""
+    """``spec`` held or loaded by ``boundary`` alone (on all of its surface unless it has a region):
+    no gravity, static or quasi-static, f64, rtol 1e-12, DG with the IP flux."""
     analysis = {"kind": "quasistatic", "steps": 2} if spec["analysis"]["kind"] == "quasistatic" else {"kind": "static"}
     method = {**spec["method"], "flux": "ip"} if spec["method"]["kind"] == "dg" else spec["method"]
     everywhere = {"box": [[-1e3] * spec["dimension"], [1e3] * spec["dimension"]]}
-    return {**spec, "boundaries": [{**boundary, "name": "all", "region": everywhere}], "method": method, "loads": {},
+    return {**spec, "boundaries": [{"region": everywhere, **boundary, "name": "all"}], "method": method, "loads": {},
             "analysis": analysis, "solver": {**spec["solver"], "rtol": 1e-12, "precision": "f64"},
             "output": {**spec["output"], "fields": fields, "surface": True}}
 
@@ -226,7 +227,6 @@ def shift(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, d
         value[int(rng.integers(d))] = None
     want = np.array([0.0 if v is None else v for v in value])
     job = _oracle_job(spec, {**held[0], "value": value}, ["displacement", "stress"])
-    job["boundaries"][0]["region"] = held[0]["region"]
     return job, {"displacement": (want, float(np.linalg.norm(c))),
                  "stress": (np.zeros(6), _p_modulus(spec) * float(np.linalg.norm(c)))}
 
@@ -249,9 +249,9 @@ def oracle_errors(r, wanted: dict) -> dict[str, float]:
     worst: dict[str, float] = {}
     for level in r.steps or [r.fields]:
         load = level.time if level.time is not None else 1.0
+        parts = {"cells": (level.cells, half), "slivers": (level.cells, ~half), "probes": (level.probes, None),
+                 "surface": (level.surface, None)}
         for name, (value, scale) in wanted.items():
-            parts = {"cells": (level.cells, half), "slivers": (level.cells, ~half), "probes": (level.probes, None),
-                     "surface": (level.surface, None)}
             for where, (arrays, keep) in parts.items():
                 a = arrays.get(name)
                 if a is None:

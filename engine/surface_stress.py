@@ -7,9 +7,9 @@ on a free surface, the applied traction on a loaded patch. Each vertex's stress 
 symmetric tensor closest to the raw one (Frobenius norm) among those with sigma n = t for the
 facets around it whose traction is known: one condition per face meeting at the vertex (one where
 the surface is smooth, one per side of a sharp edge), with that face's mean normal and the loads'
-traction at the vertex with that normal (:func:`recover`). On a flat free face that replaces the normal row of sigma and keeps the in-plane
-stresses; at a free edge or corner it zeroes what the faces say. Facets of a displacement patch carry an unknown reaction and add no
-condition.
+traction at the vertex with that normal (:func:`recover`). On a flat free face that replaces the
+normal row of sigma and keeps the in-plane stresses; at a free edge or corner it zeroes what the
+faces say. Facets of a displacement patch carry an unknown reaction and add no condition.
 """
 
 from __future__ import annotations
