@@ -35,8 +35,9 @@ ROUNDOFF_STEPS = 100.0
 # the iterate of that change is the fixed point to about that change. Free thin plates at nu 0.4999
 # under pressure stall there: round-off amplified by the solve (rotations 2e-12 from I, u changing by
 # 1e-7 to 7e-7 of itself, 40x the ROUNDOFF_STEPS floor), or a fixed point the iteration leaves from
-# 1e-6 on (changes growing 1.4-1.7x per iteration, under tension too: the interface penalty's lambda
-# turns the rotations' noise into forces), both refused before as a load step too large
+# 1e-6 on (changes growing 1.3-2.1x per iteration, under tension too, so no buckling; the cause is not
+# pinned down, likely the interface terms' lambda acting on the rotations' noise), both refused before
+# as a load step too large
 STALL_ACCEPT = 1e-6
 COROTATED_MAX = 100
 OMEGA_RANGE = (0.05, 2.0)  # the relaxation factor's bounds: some progress, at most twice the step
