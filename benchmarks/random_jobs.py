@@ -25,7 +25,9 @@ exactly, whatever the shape. ``--oracle translation``: the body held at one disp
 whole surface, u = c and no stress; ``--oracle shift``: held by the draw's clamp alone (its patch,
 a component sometimes free) at c, no loads, u = c (0 in the free component) and no stress;
 ``--oracle freefall``: free under gravity alone for three backward-Euler steps, u = g t (t + dt) / 2,
-v = g t, no stress. In
+v = g t, no stress; ``--oracle uniform``: a body whose facets face at most 64 directions (boxes,
+prisms, polygons), free, each direction n pulled by sigma n of one random constant stress sigma:
+that stress everywhere (the only exact state of a traction that is not a pressure). In
 every cell, at the probes inside and on the surface the fields must be exact within
 ``ORACLE_TOLERANCE`` (relative to p, or to |c| and (lambda + 2 mu) |c| / 1 m), else ``WRONG``
 with the largest errors (cells at least half solid and the emptier ones, ``slivers``, apart). The
@@ -251,6 +253,65 @@ def freefall(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict
                  "stress": (np.zeros(6 if d == 3 else 3), _p_modulus(spec) * fall / 0.1)}
 
 
+def uniform(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict, dict] | None:
+    """A free body whose facets face a few directions (boxes, prisms, polygons), each outward
+    direction n pulled by sigma n of one random constant stress sigma (one traction boundary per
+    direction, its ``facing`` within 1 degree or less than half the angle to the next direction):
+    that stress everywhere. None for a curved mesh (more
+    than 64 directions)."""
+    d = spec["dimension"]
+    directions = _facet_directions(spec)
+    if directions is None:
+        return None
+    a = rng.uniform(-1e3, 1e3, (d, d))
+    sigma = (a + a.T) / 2
+    # a cone narrower than half the closest two directions' angle: no facet takes two tractions
+    closest = min(np.degrees(np.arccos(np.clip(a @ b, -1, 1))) for i, a in enumerate(directions)
+                  for b in directions[i + 1:])
+    cone = min(1.0, 0.45 * closest)
+    boundaries = [{"kind": "traction", "name": f"t{i}", "region": {"box": [[-1e3] * d, [1e3] * d]},
+                   "facing": {"direction": n.tolist(), "max_angle_deg": cone}, "value": (sigma @ n).tolist()}
+                  for i, n in enumerate(directions)]
+    job = {**_oracle_job(spec, None, ["stress"]), "boundaries": boundaries}
+    order = [(i, i) for i in range(d)] + ([(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)])  # Voigt order
+    return job, {"stress": (np.array([sigma[i, j] for i, j in order]), float(np.abs(sigma).max()))}
+
+
+def _facet_directions(spec: dict) -> np.ndarray | None:
+    """The distinct outward unit normals of the body's facets (3D mesh, oriented by trimesh) or
+    edges (2D polygon, the side where the even-odd rule leaves the solid) [m, d], repeats within 1e-6
+    dropped, or None beyond 64 of them."""
+    if spec["dimension"] == 3:
+        import trimesh
+
+        m = trimesh.load(spec["geometry"]["mesh"])
+        trimesh.repair.fix_normals(m, multibody=True)
+        normals = m.face_normals[m.area_faces > 1e-12 * m.area]
+    else:
+        loops = [np.asarray(loop, dtype=float) for loop in spec["geometry"]["polygon"]]
+        e = np.vstack([np.roll(loop, -1, axis=0) - loop for loop in loops])
+        mid = np.vstack([loop + (np.roll(loop, -1, axis=0) - loop) / 2 for loop in loops])
+        keep = np.linalg.norm(e, axis=1) > 0
+        e, mid = e[keep], mid[keep]
+        normals = np.c_[e[:, 1], -e[:, 0]] / np.linalg.norm(e, axis=1)[:, None]
+        probe = mid + 1e-7 * normals
+        inside = np.zeros(len(probe), dtype=bool)
+        for loop in loops:  # even-odd crossings of a ray along +x
+            a, b = loop, np.roll(loop, -1, axis=0)
+            for (ax, ay), (bx, by) in zip(a, b):
+                crosses = (ay > probe[:, 1]) != (by > probe[:, 1])
+                x = ax + (probe[:, 1] - ay) * (bx - ax) / np.where(by != ay, by - ay, 1.0)
+                inside ^= crosses & (probe[:, 0] < x)
+        normals = np.where(inside[:, None], -normals, normals)
+    kept: list[np.ndarray] = []
+    for n in normals:
+        if not any(np.abs(n - k).max() < 1e-6 for k in kept):
+            kept.append(n)
+            if len(kept) > 64:
+                return None
+    return np.array(kept)
+
+
 def _p_modulus(spec: dict) -> float:
     """lambda + 2 mu [Pa] of the draw's material: the stress of a unit strain, what round-off in the
     displacement turns into (1667 E at nu 0.4999)."""
@@ -258,7 +319,8 @@ def _p_modulus(spec: dict) -> float:
     return e * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
 
 
-ORACLES = {"hydrostatic": hydrostatic, "translation": translation, "shift": shift, "freefall": freefall}
+ORACLES = {"hydrostatic": hydrostatic, "translation": translation, "shift": shift, "freefall": freefall,
+           "uniform": uniform}
 
 
 def oracle_errors(r, wanted: dict) -> dict[str, float]:
