@@ -263,7 +263,8 @@ def uniform(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict,
     directions = _facet_directions(spec)
     if directions is None:
         return None
-    a = rng.uniform(-1e3, 1e3, (d, d))
+    # strains of 1e-6 at most: the corotated model holds a constant stress only where it is linear
+    a = rng.uniform(-1, 1, (d, d)) * min(1e3, 1e-6 * spec["material"]["youngs_modulus"])
     sigma = (a + a.T) / 2
     # a cone narrower than half the closest two directions' angle: no facet takes two tractions
     closest = min(np.degrees(np.arccos(np.clip(a @ b, -1, 1))) for i, a in enumerate(directions)
@@ -273,13 +274,19 @@ def uniform(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict,
                    "facing": {"direction": n.tolist(), "max_angle_deg": cone}, "value": (sigma @ n).tolist()}
                   for i, n in enumerate(directions)]
     job = {**_oracle_job(spec, None, ["stress"]), "boundaries": boundaries}
+    from engine.surface_stress import FEATURE_ANGLE
+
+    if closest < FEATURE_ANGLE:
+        # facets closer than the feature angle are one face at a vertex (surface_stress), whose
+        # traction is the mean of theirs, sigma n_mean, short of sigma n by 1 - |n_mean| (5e-3 on a 32-gon)
+        job["output"] = {**job["output"], "surface": False}
     order = [(i, i) for i in range(d)] + ([(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)])  # Voigt order
     return job, {"stress": (np.array([sigma[i, j] for i, j in order]), float(np.abs(sigma).max()))}
 
 
 def _facet_directions(spec: dict) -> np.ndarray | None:
     """The distinct outward unit normals of the body's facets (3D mesh, oriented by trimesh) or
-    edges (2D polygon, the side where the even-odd rule leaves the solid) [m, d], repeats within 1e-6
+    edges (2D polygon, the side where the even-odd rule leaves the solid) [m, d], repeats within 1e-4
     dropped, or None beyond 64 of them."""
     if spec["dimension"] == 3:
         import trimesh
@@ -304,8 +311,8 @@ def _facet_directions(spec: dict) -> np.ndarray | None:
                 inside ^= crosses & (probe[:, 0] < x)
         normals = np.where(inside[:, None], -normals, normals)
     kept: list[np.ndarray] = []
-    for n in normals:
-        if not any(np.abs(n - k).max() < 1e-6 for k in kept):
+    for n in normals:  # 1e-4: above the float32 STL's scatter of one plane's facet normals
+        if not any(np.abs(n - k).max() < 1e-4 for k in kept):
             kept.append(n)
             if len(kept) > 64:
                 return None
