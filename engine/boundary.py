@@ -25,7 +25,7 @@ from .clusters import clustered_rule
 from .errors import BoundaryError
 from .geometry.surface import Surface
 from .regions import Region, make_region
-from .subdivision import split_facets, subdivided
+from .subdivision import lattice_pieces, split_facets, subdivided
 
 PointFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -399,12 +399,14 @@ def _check_overlap(a: Prescribed, pieces: np.ndarray, b: Prescribed, d: int) -> 
 
 
 def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = False,
-                       merge: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       merge: bool = False, lattice: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
     as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
 
     Pieces with an edge longer than ``spacing`` / 2 [m] are subdivided (``subdivision.subdivided``)
-    until none is, so each piece crosses few cells of a piecewise-multilinear grid field; on each piece a
+    until none is, so each piece crosses few cells of a piecewise-multilinear grid field; with
+    ``lattice`` (an origin [d] [m]) they are cut instead at the planes ``spacing`` / 2 apart from it
+    (``subdivision.lattice_pieces``), so each lies in one box of them; on each piece a
     degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
     ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
     of each piece). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
@@ -420,7 +422,7 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     if not (math.isfinite(spacing) and spacing > 0):
         raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
     d = facets.shape[2]
-    facets = subdivided(facets, 0.5 * spacing)
+    facets = subdivided(facets, 0.5 * spacing) if lattice is None else lattice_pieces(facets, lattice, 0.5 * spacing)
     measure, normals = _measure_and_normal(facets)
     keep = measure > 0
     facets, measure, normals = facets[keep], measure[keep], normals[keep]
@@ -465,14 +467,15 @@ def boundary_tractions(
     return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
 
 
-def patch_quadrature(surface: Surface, region: Region, spacing: float, *,
-                     name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def patch_quadrature(surface: Surface, region: Region, spacing: float, *, name: str,
+                     lattice: np.ndarray | None = None, centroids: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`surface_quadrature` at ``spacing`` [m] on the surface patch of ``region`` (a region
-    holding no surface is an error naming ``name``, :func:`select_patch`): points [Q, d] [m],
+    holding no surface is an error naming ``name``, :func:`select_patch`), its pieces cut at the
+    planes of ``lattice`` when given, one point per piece with ``centroids``: points [Q, d] [m],
     weights [Q] [m^2 | m], unit outward normals [Q, d]."""
     d = surface.dim
     pieces, _ = select_patch(region, surface.vertices[surface.faces], name)
-    return surface_quadrature(pieces.reshape(-1, d, d), spacing)
+    return surface_quadrature(pieces.reshape(-1, d, d), spacing, centroids=centroids, lattice=lattice)
 
 
 def tractions(points: np.ndarray, normals: np.ndarray, *, name: str, traction=None, pressure: float | None = None,

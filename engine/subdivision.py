@@ -118,3 +118,53 @@ def _strips(apex: np.ndarray, b: np.ndarray, c: np.ndarray, longest: float) -> n
     p0, p1, q0, q1 = a0 + t0 * ab, a0 + t1 * ab, a0 + t0 * ac, a0 + t1 * ac
     outer = ((j % 2) == 1) | (j == 0)
     return np.stack([p0, np.where(outer[:, None], p1, q1), np.where(outer[:, None], q1, q0)], axis=1)
+
+
+def lattice_pieces(facets: np.ndarray, origin: np.ndarray, step: float) -> np.ndarray:
+    """Facets [M, d, d] cut at every plane ``origin``_k + j ``step`` [m] of each axis k into pieces
+    [K, d, d] that each lie in one box of that lattice, orientation kept (a piece through a vertex on
+    a plane can have zero measure: the quadrature drops it). A weight that is polynomial in each box
+    (a multilinear hat, or the staggered loads' hats times nearest-sample boxes, whose kinks and jumps
+    lie on planes h/2 apart) is then integrated exactly by a rule exact for that degree."""
+    facets = np.asarray(facets, dtype=float)
+    d = facets.shape[-1]
+    origin = np.asarray(origin, dtype=float)
+    f = (facets.reshape(-1, d, d) - origin) / step  # lattice units
+    for axis in range(d):
+        f = _cut_along(f, axis)
+    return f * step + origin
+
+
+def _cut_along(f: np.ndarray, axis: int) -> np.ndarray:
+    """Pieces [M, d, d] (lattice units) cut at the integer planes along ``axis``: each pass cuts
+    every piece that crosses one at the lowest plane it crosses, and keeps the part below it."""
+    done = []
+    while len(f):
+        c = f[:, :, axis]
+        plane = np.floor(c.min(axis=1)) + 1.0
+        cross = plane < c.max(axis=1)
+        done.append(f[~cross])
+        f, plane = f[cross], plane[cross]
+        if len(f):
+            f = _split(f, plane, axis)
+    return np.concatenate(done) if done else f
+
+
+def _split(f: np.ndarray, plane: np.ndarray, axis: int) -> np.ndarray:
+    """Pieces [M, d, d] that cross ``plane`` [M] along ``axis``, split there (orientation kept):
+    a segment into two, a triangle into the one on its lone vertex's side and two on the other."""
+    s = f[:, :, axis] - plane[:, None]
+    if f.shape[-1] == 2:
+        p, q = f[:, 0], f[:, 1]
+        a = p + (s[:, 0] / (s[:, 0] - s[:, 1]))[:, None] * (q - p)
+        a[:, axis] = plane
+        return np.concatenate([np.stack([p, a], axis=1), np.stack([a, q], axis=1)])
+    above = s > 0
+    lone = np.where(above.sum(axis=1) == 1, above.argmax(axis=1), (~above).argmax(axis=1))
+    l, v1, v2 = rolled(f, lone)
+    sl, s1, s2 = (np.take_along_axis(s, ((lone + k) % 3)[:, None], axis=1)[:, 0] for k in range(3))
+    a = l + (sl / (sl - s1))[:, None] * (v1 - l)
+    b = l + (sl / (sl - s2))[:, None] * (v2 - l)
+    a[:, axis] = plane
+    b[:, axis] = plane
+    return np.concatenate([np.stack([l, a, b], axis=1), np.stack([a, v1, v2], axis=1), np.stack([a, v2, b], axis=1)])

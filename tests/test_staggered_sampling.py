@@ -11,7 +11,7 @@ from engine.errors import VoxelasticError
 from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
 from engine.boundary import boundary_tractions, surface_quadrature
-from engine.subdivision import subdivided
+from engine.subdivision import lattice_pieces, subdivided
 from engine.staggered.sampling import interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 
@@ -168,6 +168,27 @@ def test_slivers_are_cut_into_pieces_linear_in_their_length_with_area_and_orient
                                    rtol=0, atol=1e-11 * area.sum())
         whole, w_whole, _ = surface_quadrature(facets, 100.0)  # unsplit: the degree-5 rule is exact for x^3
         assert (weights * points[:, 0] ** 3).sum() == pytest.approx((w_whole * whole[:, 0] ** 3).sum(), rel=1e-10, abs=1e-14)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_lattice_pieces_lie_in_one_box_each_with_measure_and_orientation_kept(d):
+    """Facets cut at the planes h/2 apart (the staggered loads' spread is polynomial between them):
+    every piece in one box of the lattice, the area vectors and a cubic moment kept."""
+    rng = np.random.default_rng(3)
+    origin, step = np.array([-1.03, -0.97, -1.011])[:d], 0.05
+    facets = [rng.normal(size=(40, d, d)) * 0.3, np.array([[[0.0, 0.0], [1.0, 0.004]]] if d == 2 else
+                                                     [[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.004, 0.0]]])]
+    for f in facets:
+        pieces = lattice_pieces(f, origin, step)
+        unit = (pieces - origin) / step
+        box = np.floor(unit.mean(axis=1))
+        assert (unit >= box[:, None] - 1e-9).all() and (unit <= box[:, None] + 1 + 1e-9).all()
+        points, weights, normals = surface_quadrature(f, 2 * step, lattice=origin)
+        whole, w_whole, n_whole = surface_quadrature(f, 100.0)
+        assert weights.sum() == pytest.approx(w_whole.sum(), rel=1e-12)
+        np.testing.assert_allclose((weights[:, None] * normals).sum(0), (w_whole[:, None] * n_whole).sum(0),
+                                   rtol=0, atol=1e-12 * w_whole.sum())
+        assert (weights * points[:, 0] ** 3).sum() == pytest.approx((w_whole * whole[:, 0] ** 3).sum(), rel=1e-10, abs=1e-13)
 
 
 def _rotation(rng) -> np.ndarray:

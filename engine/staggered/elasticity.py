@@ -127,7 +127,11 @@ class StaggeredElasticity(StaggeredFields):
         self._load_points = {}
         for load in self.surface_loads:
             if load.form != "divergence":
-                x, w, n = patch_quadrature(self.surface, load.region, grid.spacing, name=load.name)
+                # one point per piece of the lattice: the spread times a piece's traction is linear there
+                # (the degree-5 rule's 7 points on the cut pieces were 2.8x main's points: 104 M on a
+                # sphere at h = 1/128, 62 s)
+                x, w, n = patch_quadrature(self.surface, load.region, grid.spacing, name=load.name,
+                                           lattice=np.asarray(grid.origin, dtype=float), centroids=True)
                 t = tractions(x, n, name=load.name, traction=load.traction, pressure=load.pressure, stress=load.stress)
                 self._load_points[id(load)] = (x, w, t, n)
         # Ghost samples (engine/staggered/ghosts.py) beyond the surface where loads act, and where holds
@@ -245,11 +249,11 @@ class StaggeredElasticity(StaggeredFields):
                 gap = self._divergence_gap(load, f.sum(axis=1) - before)
                 if gap is None:
                     continue
-                pts, w, t = gap
+                pts, w, t, normals = gap
                 bodies = self._body_lookup() if bodies is None else bodies
             else:
-                pts, w, t, _ = self._load_points[id(load)]
-            spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, name=load.name)
+                pts, w, t, normals = self._load_points[id(load)]
+            spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, normals=normals, name=load.name)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         f += flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
@@ -274,11 +278,11 @@ class StaggeredElasticity(StaggeredFields):
 
     def _divergence_gap(self, load: SurfaceLoad, net: np.ndarray):
         """What the divergence form of ``load`` (its net force ``net`` [d] [N]) misses of the patch's
-        resultant, as a uniform traction on the patch: (points [Q, d], weights [Q], traction [Q, d]),
-        or None when it misses nothing. The form reads the stress through whole rows, so a row that
-        sees the patch and a free surface at once (a body one or two cells thick) lost part of its
-        force: 640 of a pressure's 800 N on a plate 1.6 cells thick, a sphere's cap 3.8% short at 6
-        cells across. A closed patch's resultant is zero in both and gets nothing."""
+        resultant, as a uniform traction on the patch: (points [Q, d], weights [Q], traction [Q, d],
+        normals [Q, d]), or None when it misses nothing. The form reads the stress through whole
+        rows, so a row that sees the patch and a free surface at once (a body one or two cells thick)
+        lost part of its force: 640 of a pressure's 800 N on a plate 1.6 cells thick, a sphere's cap
+        3.8% short at 6 cells across. A closed patch's resultant is zero in both and gets nothing."""
         d, h = self.dim, self.grid.spacing
         pieces, _ = select_patch(load.region, self.surface.vertices[self.surface.faces], load.name)
         pieces = pieces.reshape(-1, d, d)
@@ -294,10 +298,10 @@ class StaggeredElasticity(StaggeredFields):
             return None
         # the gap is a uniform traction: one point per piece spreads it with the same measure and
         # first moments as the degree-5 rule, at a seventh of the points (the ball at h = 1/32: 1.7 M)
-        x, w, _ = surface_quadrature(pieces, h, centroids=True)
+        x, w, n = surface_quadrature(pieces, h, centroids=True, lattice=np.asarray(self.grid.origin, dtype=float))
         if w.sum() <= 0:
             return None
-        return x, w, np.broadcast_to((exact - net) / w.sum(), (len(w), d))
+        return x, w, np.broadcast_to((exact - net) / w.sum(), (len(w), d)), n
 
     def _divergence_load(self, load: SurfaceLoad, f: np.ndarray) -> None:
         """Add to ``f`` [d, size] the work of sigma n on the surface written as a volume integral

@@ -3,10 +3,16 @@
 Displacement component ``a`` lives on the a-faces: sample ``(a, I)`` at ``origin + h (I + 0.5 -
 0.5 e_a)``. Between samples it is read by multilinear interpolation on that shifted lattice
 (``stencil``); inside the material only active samples count, their weights renormalised
-(``interpolate``). A traction ``t`` on the surface becomes nodal forces by the transpose of the same
-interpolation, ``f_a(I) = sum_q w_q t_a(x_q) phi_{a,I}(x_q)``, so that ``sum f . u`` is the
-quadrature of ``integral t . u_h dA``: the load does work on exactly the displacement the output
-reports, and a constant traction keeps its total force.
+(``interpolate``). A traction ``t`` on the surface becomes nodal forces
+``f_a(I) = sum_q w_q t_a(x_q) psi_{a,I}(x_q)`` with the energy's own weights (given the points'
+normals n): psi = sum_j n_j^2 (the hat along j times the nearest sample along the other axes). That
+is how the operator's weights take a constant stress (row a's sigma_aj term reads fraction
+differences along j of boxes h wide across j), so on faces normal to an axis the load is the
+energy's own force of the stress the traction belongs to, cut cells and corners included; the
+transpose of the interpolation (psi = phi, the hats along every axis) spread a shear traction at a
+rectangle's corner 0.23 of it off and put a third row's worth of load across every face. Either
+way a constant traction keeps its total force. The points' pieces must be cut at the planes h/2
+apart (``boundary.surface_quadrature``'s ``lattice``), where psi jumps.
 
 Renormalising over the active samples moves a point's force to where they are, so at cut cells
 the load's moment is off by O(h F). Every body's load therefore gets the self-equilibrated couple
@@ -141,6 +147,7 @@ def surface_loads(
     active: Active | None = None,
     *,
     bodies: Bodies | None = None,
+    normals: np.ndarray | None = None,
     name: str = "surface load",
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Consistent load vector of tractions [Q, d] [Pa] at quadrature ``points`` [Q, d] with ``weights`` [Q].
@@ -150,6 +157,9 @@ def surface_loads(
     ``sum f . u = sum_q w_q t(x_q) . u_h(x_q)`` for the multilinear interpolant ``u_h``. Only samples
     of nonzero stencil weight appear; they can lie outside the index box for points within h/2 of
     the grid's edge.
+
+    With the points' unit ``normals`` [Q, d] the weights are the energy's own instead of phi (module
+    docstring), on the same 2^d samples.
 
     With ``active(a, index [M, d]) -> bool [M]`` the transpose of ``interpolate`` is used instead:
     inactive samples are dropped and the rest renormalised, so no force is lost on inactive DOFs
@@ -176,7 +186,7 @@ def surface_loads(
         # Surface points far outnumber the cells they cross (~50 per cell on a fine mesh): samples are
         # looked up, and forces gathered, per (cell, corner) slot, never per (point, corner) entry.
         base, frac = _lattice(grid, points, a)
-        phi = _corner_weights(frac)  # [N, 2^d]
+        phi = _corner_weights(frac) if normals is None else _energy_weights(frac, normals)  # [N, 2^d]
         cells, cell_of = _unique_rows(base)
         near = cells[:, None, :] + corners[None]  # [C, 2^d, d]: the samples of each cell
         load = weights * tractions[:, a]
@@ -193,6 +203,21 @@ def surface_loads(
             samples, force = _balanced(grid, load, a, (cells, cell_of, frac, phi), (samples, force), active, bodies)
         loads.append((samples, force))
     return loads
+
+
+def _energy_weights(frac: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Weights [N, 2^d] of the corners of :func:`_corners` at offsets frac [N, d] of points with unit
+    normals [N, d]: sum_j n_j^2 times the hat along j and, along every other axis, the nearer sample."""
+    n, d = frac.shape
+    hat = [np.stack([1.0 - frac[:, b], frac[:, b]], axis=1) for b in range(d)]
+    nearest = [np.stack([frac[:, b] < 0.5, frac[:, b] >= 0.5], axis=1).astype(float) for b in range(d)]
+    out = np.zeros((n, 2**d))
+    for j in range(d):
+        psi = np.ones((n,) + (1,) * d)
+        for b in range(d):
+            psi = psi * (hat[b] if b == j else nearest[b]).reshape((n,) + (1,) * b + (2,) + (1,) * (d - 1 - b))
+        out += normals[:, j, None] ** 2 * psi.reshape(n, 2**d)
+    return out
 
 
 def renormalised(phi: np.ndarray, is_active: np.ndarray) -> np.ndarray:
