@@ -398,8 +398,8 @@ def _check_overlap(a: Prescribed, pieces: np.ndarray, b: Prescribed, d: int) -> 
     )
 
 
-def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = False,
-                       merge: bool = False, lattice: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = False, merge: bool = False,
+                       lattice: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quadrature rule on surface pieces ``facets`` [M, d, d] (3D triangles / 2D segments, oriented
     as engine.geometry.surface: 3D right-hand rule outward, 2D solid on the left).
 
@@ -467,8 +467,8 @@ def boundary_tractions(
     return points, weights, tractions(points, normals, name=name, traction=traction, pressure=pressure, stress=stress)
 
 
-def patch_quadrature(surface: Surface, region: Region, spacing: float, *, name: str,
-                     lattice: np.ndarray | None = None, centroids: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def patch_quadrature(surface: Surface, region: Region, spacing: float, *, name: str, lattice: np.ndarray | None = None,
+                     centroids: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`surface_quadrature` at ``spacing`` [m] on the surface patch of ``region`` (a region
     holding no surface is an error naming ``name``, :func:`select_patch`), its pieces cut at the
     planes of ``lattice`` when given, one point per piece with ``centroids``: points [Q, d] [m],

@@ -176,8 +176,8 @@ def test_lattice_pieces_lie_in_one_box_each_with_measure_and_orientation_kept(d)
     every piece in one box of the lattice, the area vectors and a cubic moment kept."""
     rng = np.random.default_rng(3)
     origin, step = np.array([-1.03, -0.97, -1.011])[:d], 0.05
-    facets = [rng.normal(size=(40, d, d)) * 0.3, np.array([[[0.0, 0.0], [1.0, 0.004]]] if d == 2 else
-                                                     [[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.004, 0.0]]])]
+    needle = [[[0.0, 0.0], [1.0, 0.004]]] if d == 2 else [[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.004, 0.0]]]
+    facets = [rng.normal(size=(40, d, d)) * 0.3, np.array(needle)]
     for f in facets:
         pieces = lattice_pieces(f, origin, step)
         unit = (pieces - origin) / step
@@ -188,7 +188,8 @@ def test_lattice_pieces_lie_in_one_box_each_with_measure_and_orientation_kept(d)
         assert weights.sum() == pytest.approx(w_whole.sum(), rel=1e-12)
         np.testing.assert_allclose((weights[:, None] * normals).sum(0), (w_whole[:, None] * n_whole).sum(0),
                                    rtol=0, atol=1e-12 * w_whole.sum())
-        assert (weights * points[:, 0] ** 3).sum() == pytest.approx((w_whole * whole[:, 0] ** 3).sum(), rel=1e-10, abs=1e-13)
+        cubic = (w_whole * whole[:, 0] ** 3).sum()
+        assert (weights * points[:, 0] ** 3).sum() == pytest.approx(cubic, rel=1e-10, abs=1e-13)
 
 
 def _rotation(rng) -> np.ndarray:

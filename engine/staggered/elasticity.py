@@ -128,8 +128,8 @@ class StaggeredElasticity(StaggeredFields):
         for load in self.surface_loads:
             if load.form != "divergence":
                 # one point per piece of the lattice: the spread times a piece's traction is linear there
-                # (the degree-5 rule's 7 points on the cut pieces were 2.8x main's points: 104 M on a
-                # sphere at h = 1/128, 62 s)
+                # (the degree-5 rule's 7 points on the cut pieces were 2.8x those of the subdivided
+                # pieces: 104 M on a whole sphere at h = 1/128, 62 s)
                 x, w, n = patch_quadrature(self.surface, load.region, grid.spacing, name=load.name,
                                            lattice=np.asarray(grid.origin, dtype=float), centroids=True)
                 t = tractions(x, n, name=load.name, traction=load.traction, pressure=load.pressure, stress=load.stress)
