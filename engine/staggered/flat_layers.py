@@ -177,8 +177,8 @@ def end_loads(level: Level, weights: list[tuple[np.ndarray, np.ndarray]],
     """What the surface loads given at points (``loads``: (points [Q, d] m, weights [Q] m^2,
     tractions [Q, d] Pa, normals [Q, d]) each) add [d, size] [N] where a moved a-line ends: the
     energy reaches an end row of a uniaxial sigma_aa through alpha w^a + (1 - alpha) V, alpha the mu
-    share ((d - 1) lambda + 2 mu) / (d lambda + 2 mu), while the multilinear trace spreads the load by
-    area (about V); each end row gets alpha t_a h^(d-1) dw, t_a the mean traction of its cell's points.
+    share ((d - 1) lambda + 2 mu) / (d lambda + 2 mu), while the loads' spread (sampling.py) gives it
+    by area, V; each end row gets alpha t_a h^(d-1) dw, t_a the mean traction of its cell's points.
     The rows' sum is unchanged where the traction is uniform."""
     d, h, lay = level.dim, level.spacing, level.layout
     lam, mu = level.lam, level.mu
