@@ -267,8 +267,8 @@ def uniform(spec: dict, rng: np.random.Generator, kind: str = "") -> tuple[dict,
     a = rng.uniform(-1, 1, (d, d)) * min(1e3, 1e-6 * spec["material"]["youngs_modulus"])
     sigma = (a + a.T) / 2
     # a cone narrower than half the closest two directions' angle: no facet takes two tractions
-    closest = min(np.degrees(np.arccos(np.clip(a @ b, -1, 1))) for i, a in enumerate(directions)
-                  for b in directions[i + 1:])
+    closest = min(np.degrees(np.arccos(np.clip(m @ n, -1, 1))) for i, m in enumerate(directions)
+                  for n in directions[i + 1:])
     cone = min(1.0, 0.45 * closest)
     boundaries = [{"kind": "traction", "name": f"t{i}", "region": {"box": [[-1e3] * d, [1e3] * d]},
                    "facing": {"direction": n.tolist(), "max_angle_deg": cone}, "value": (sigma @ n).tolist()}

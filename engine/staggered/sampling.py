@@ -9,9 +9,9 @@ normals n): psi = sum_j n_j^2 (the hat along j times the nearest sample along th
 is how the operator's weights take a constant stress (row a's sigma_aj term reads fraction
 differences along j of boxes h wide across j), so on faces normal to an axis the load is the
 energy's own force of the stress the traction belongs to, cut cells and corners included; the
-transpose of the interpolation (psi = phi, the hats along every axis) spread a shear traction at a
-rectangle's corner 0.23 of it off and put a third row's worth of load across every face. Either
-way a constant traction keeps its total force. The points' pieces must be cut at the planes h/2
+transpose of the interpolation (psi = phi, the hats along every axis) left a shear traction's state
+0.23 off at a rectangle's corners and a pulled cylinder's 1.48 T off in a sliver. Either way a
+constant traction keeps its total force. The points' pieces must be cut at the planes h/2
 apart (``boundary.surface_quadrature``'s ``lattice``), where psi jumps.
 
 Renormalising over the active samples moves a point's force to where they are, so at cut cells
