@@ -409,7 +409,7 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     (``subdivision.lattice_pieces``), so each lies in one box of them; on each piece a
     degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
     ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
-    of each piece). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
+    of each piece; with ``lattice``, one point for all of a facet's pieces in a box). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
     grid) are merged into clusters of that side, each with a rule exact to its second moments
     (:mod:`engine.clusters`): points follow the grid, not the triangle count. Zero-area pieces are
     dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total area / length
@@ -422,6 +422,8 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     if not (math.isfinite(spacing) and spacing > 0):
         raise ValueError(f"spacing: must be a positive finite number, got {spacing}")
     d = facets.shape[2]
+    if lattice is not None and centroids:
+        return _box_centroids(facets, np.asarray(lattice, dtype=float), 0.5 * spacing)
     facets = subdivided(facets, 0.5 * spacing) if lattice is None else lattice_pieces(facets, lattice, 0.5 * spacing)
     measure, normals = _measure_and_normal(facets)
     keep = measure > 0
@@ -439,6 +441,32 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
         return points, weights, rule_normals
     merged = clustered_rule(facets[small], measure[small], normals[small], CLUSTER * spacing)
     return tuple(np.concatenate(pair) for pair in zip((points, weights, rule_normals), merged))
+
+
+def _box_centroids(facets: np.ndarray, origin: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one-point rule of each facet's part in each box of the lattice ``origin`` + j ``step``
+    [m]: its centroid, measure and the facet's unit normal (points [Q, d], weights [Q], normals [Q,
+    d]). The cuts leave a part as several triangles (a box's section of a plane has up to six
+    sides); one point for all of them is as exact for what is linear in the box, at about a tenth of
+    the points (a sphere's 20,480 facets at h = 1/48: 1.35 M triangles)."""
+    d = facets.shape[-1]
+    pieces, parent = lattice_pieces(facets, origin, step, parents=True)
+    measure, _ = _measure_and_normal(pieces)
+    keep = measure > 0
+    pieces, parent, measure = pieces[keep], parent[keep], measure[keep]
+    centre = pieces.mean(axis=1)
+    box = np.floor((centre - origin) / step).astype(np.int64)
+    lo = box.min(axis=0, initial=0)
+    dims = tuple(int(v) for v in box.max(axis=0, initial=0) - lo + 1)
+    key = parent * math.prod(dims) + np.ravel_multi_index(tuple((box - lo).T), dims)  # one sort, not rows'
+    _, group = np.unique(key, return_inverse=True)
+    group = group.ravel()
+    weight = np.bincount(group, weights=measure)
+    points = np.stack([np.bincount(group, weights=measure * centre[:, k]) for k in range(d)], axis=1) / weight[:, None]
+    first = np.zeros(len(weight), dtype=np.int64)
+    first[group] = parent
+    _, normals = _measure_and_normal(facets[first])
+    return points, weight, normals
 
 
 def boundary_tractions(

@@ -120,34 +120,40 @@ def _strips(apex: np.ndarray, b: np.ndarray, c: np.ndarray, longest: float) -> n
     return np.stack([p0, np.where(outer[:, None], p1, q1), np.where(outer[:, None], q1, q0)], axis=1)
 
 
-def lattice_pieces(facets: np.ndarray, origin: np.ndarray, step: float) -> np.ndarray:
+def lattice_pieces(facets: np.ndarray, origin: np.ndarray, step: float, parents: bool = False):
     """Facets [M, d, d] cut at every plane ``origin``_k + j ``step`` [m] of each axis k into pieces
     [K, d, d] that each lie in one box of that lattice, orientation kept (a piece through a vertex on
     a plane can have zero measure: the quadrature drops it). A weight that is polynomial in each box
     (a multilinear hat, or the staggered loads' hats times nearest-sample boxes, whose kinks and jumps
-    lie on planes h/2 apart) is then integrated exactly by a rule exact for that degree."""
+    lie on planes h/2 apart) is then integrated exactly by a rule exact for that degree. With
+    ``parents`` also the facet each piece came from: (pieces, index [K] into facets)."""
     facets = np.asarray(facets, dtype=float)
     d = facets.shape[-1]
     origin = np.asarray(origin, dtype=float)
     f = (facets.reshape(-1, d, d) - origin) / step  # lattice units
+    ids = np.arange(len(f))
     for axis in range(d):
-        f = _cut_along(f, axis)
-    return f * step + origin
+        f, ids = _cut_along(f, ids, axis)
+    return (f * step + origin, ids) if parents else f * step + origin
 
 
-def _cut_along(f: np.ndarray, axis: int) -> np.ndarray:
-    """Pieces [M, d, d] (lattice units) cut at the integer planes along ``axis``: each pass cuts
-    every piece that crosses one at the lowest plane it crosses, and keeps the part below it."""
-    done = []
+def _cut_along(f: np.ndarray, ids: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pieces [M, d, d] (lattice units) cut at the integer planes along ``axis``, with the labels
+    ``ids`` [M] each piece passes on to its parts: each pass cuts every piece that crosses one at the
+    lowest plane it crosses, and keeps the part below it."""
+    done, done_ids = [], []
     while len(f):
         c = f[:, :, axis]
         plane = np.floor(c.min(axis=1)) + 1.0
         cross = plane < c.max(axis=1)
         done.append(f[~cross])
-        f, plane = f[cross], plane[cross]
+        done_ids.append(ids[~cross])
+        f, ids, plane = f[cross], ids[cross], plane[cross]
         if len(f):
-            f = _split(f, plane, axis)
-    return np.concatenate(done) if done else f
+            parts = _split(f, plane, axis)
+            ids = np.tile(ids, len(parts) // len(f))  # _split returns its parts in blocks of the input's order
+            f = parts
+    return (np.concatenate(done), np.concatenate(done_ids)) if done else (f, ids)
 
 
 def _split(f: np.ndarray, plane: np.ndarray, axis: int) -> np.ndarray:

@@ -12,7 +12,7 @@ from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
 from engine.boundary import boundary_tractions, surface_quadrature
 from engine.subdivision import lattice_pieces, subdivided
-from engine.staggered.sampling import interpolate, stencil, surface_loads
+from engine.staggered.sampling import _torque_couple, interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 
 GRIDS = {
@@ -192,6 +192,33 @@ def test_lattice_pieces_lie_in_one_box_each_with_measure_and_orientation_kept(d)
         assert (weights * points[:, 0] ** 3).sum() == pytest.approx(cubic, rel=1e-10, abs=1e-13)
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_lattice_centroids_are_one_point_per_facet_and_box_with_its_measure_and_first_moments(d):
+    rng = np.random.default_rng(8)
+    origin, step = np.array([-1.03, -0.97, -1.011])[:d], 0.05
+    facets = rng.normal(size=(30, d, d)) * 0.3
+    pieces, parent = lattice_pieces(facets, origin, step, parents=True)
+    points, weights, normals = surface_quadrature(facets, 2 * step, lattice=origin, centroids=True)
+    each, w_each, n_each = surface_quadrature(pieces, 100.0, centroids=True)  # every cut piece a point
+    if d == 3:
+        measure = 0.5 * np.linalg.norm(np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0]), axis=1)
+    else:
+        measure = np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1)
+    parent = parent[measure > 0]  # the quadrature drops pieces of no measure
+    assert len(parent) == len(each)
+    box, box_each = (np.floor((x - origin) / step).astype(np.int64) for x in (points, each))
+    # a point per (facet, box) holding a piece: in 3D the cuts leave a part as several triangles
+    groups = np.unique(np.column_stack([parent, box_each]), axis=0)
+    assert len(points) == len(groups) and (len(points) < len(each) if d == 3 else len(points) == len(each))
+    for key in np.unique(box, axis=0):
+        mine, theirs = (box == key).all(axis=1), (box_each == key).all(axis=1)
+        assert weights[mine].sum() == pytest.approx(w_each[theirs].sum(), rel=1e-12)
+        np.testing.assert_allclose((weights[mine, None] * points[mine]).sum(0),
+                                   (w_each[theirs, None] * each[theirs]).sum(0), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose((weights[mine, None] * normals[mine]).sum(0),
+                                   (w_each[theirs, None] * n_each[theirs]).sum(0), rtol=1e-12, atol=1e-15)
+
+
 def _rotation(rng) -> np.ndarray:
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     return q * np.sign(np.linalg.det(q))  # proper: orientation kept
@@ -341,6 +368,37 @@ def test_loads_on_free_rotated_bodies_keep_the_quadratures_force_and_moment(d):
     force, moment = resultant(grid, loads)
     total = 2.5e3 * weights.sum()
     assert np.abs(force).max() < 1e-12 * total and np.abs(moment).max() < 2e-12 * total
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_torque_couple_is_the_least_forces_with_that_torque_and_no_net_force(d):
+    rng = np.random.default_rng(11)
+    rooms = [(rng.integers(-4, 5, size=(n, d)).astype(float), rng.uniform(0.1, 2.0, n)) for n in (30, 0, 25)[:d]]
+    t = rng.normal(size=(d, d))
+    torque = t - t.T
+    forces = _torque_couple(rooms, torque)
+    pairs = list(itertools.combinations(range(d), 2))
+    for f, (x, room) in zip(forces, rooms):
+        assert f.shape == room.shape and abs(f.sum()) < 1e-12 * np.abs(torque).max()
+    got = [(forces[a] * rooms[a][0][:, b]).sum() - (forces[b] * rooms[b][0][:, a]).sum() for a, b in pairs]
+    np.testing.assert_allclose(got, [-torque[a, b] for a, b in pairs], atol=1e-12 * np.abs(torque).max())
+    # the same constraints solved as a weighted least-norm problem over all the forces at once
+    offsets = np.cumsum([0] + [len(r) for _, r in rooms])
+    rows = []
+    for a in range(d):  # no net force per component
+        row = np.zeros(offsets[-1])
+        row[offsets[a]:offsets[a + 1]] = 1.0
+        rows.append(row)
+    for a, b in pairs:
+        row = np.zeros(offsets[-1])
+        row[offsets[a]:offsets[a + 1]] = rooms[a][0][:, b]
+        row[offsets[b]:offsets[b + 1]] = -rooms[b][0][:, a]
+        rows.append(row)
+    c = np.array(rows)
+    w = np.concatenate([r for _, r in rooms])
+    want = np.concatenate([np.zeros(d), [-torque[a, b] for a, b in pairs]])
+    least = w * (c.T @ np.linalg.lstsq((c * w) @ c.T, want, rcond=None)[0])
+    np.testing.assert_allclose(np.concatenate(forces), least, atol=1e-10 * np.abs(least).max())
 
 
 def test_a_symmetric_load_on_a_grid_aligned_face_gets_no_couple():

@@ -127,9 +127,10 @@ class StaggeredElasticity(StaggeredFields):
         self._load_points = {}
         for load in self.surface_loads:
             if load.form != "divergence":
-                # one point per piece of the lattice: the spread times a piece's traction is linear there
-                # (the degree-5 rule's 7 points on the cut pieces were 2.8x those of the subdivided
-                # pieces: 104 M on a whole sphere at h = 1/128, 62 s)
+                # one point per facet and box of the lattice: the spread times a facet's traction is
+                # linear there (the degree-5 rule's 7 points on the cut pieces were 2.8x those of the
+                # subdivided pieces: 104 M on a whole sphere at h = 1/128, 62 s; one point per cut
+                # triangle 5.9 M on 3/4 of a sphere at h = 1/96, where a box's share is 0.8 M)
                 x, w, n = patch_quadrature(self.surface, load.region, grid.spacing, name=load.name,
                                            lattice=np.asarray(grid.origin, dtype=float), centroids=True)
                 t = tractions(x, n, name=load.name, traction=load.traction, pressure=load.pressure, stress=load.stress)
@@ -236,12 +237,10 @@ class StaggeredElasticity(StaggeredFields):
                 g = np.asarray(self.body_force, dtype=float)
                 for k in range(d):
                     f[k] += (grid.spacing**d * g[k]) * (level.vf_host[k] * level.active[k])
-        active = self._active_lookup
-        # each body's surface loads keep their first moments (sampling: a held bar pulled off its
-        # axis bends; a body held by nothing must be loaded in balance); the labels cost 4 bytes
-        # per sample, so only jobs with such loads make them
-        quadrature = any(load.form != "divergence" for load in self.surface_loads)
-        bodies = self._body_lookup() if quadrature else None
+        # each body's surface loads keep their net torque (sampling: a held bar pulled off its axis
+        # bends; a body held by nothing must be loaded in balance), all its loads with one couple; the
+        # labels cost 4 bytes per sample, so only jobs with such loads make them
+        pieces = []
         for load in self.surface_loads:
             if load.form == "divergence":
                 before = f.sum(axis=1)
@@ -250,10 +249,11 @@ class StaggeredElasticity(StaggeredFields):
                 if gap is None:
                     continue
                 pts, w, t, normals = gap
-                bodies = self._body_lookup() if bodies is None else bodies
             else:
                 pts, w, t, normals = self._load_points[id(load)]
-            spread = sampling.surface_loads(grid, pts, w, t, active, bodies=bodies, normals=normals, name=load.name)
+            pieces.append((pts, w, t, normals, load.name))
+        if pieces:
+            spread = sampling.point_loads(grid, pieces, self._active_lookup, self._body_lookup())
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
         f += flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
@@ -296,8 +296,8 @@ class StaggeredElasticity(StaggeredFields):
             exact, scale = (w[:, None] * t).sum(axis=0), (w * np.linalg.norm(t, axis=1)).sum()
         if np.linalg.norm(exact - net) <= GAP_TOLERANCE * scale:
             return None
-        # the gap is a uniform traction: one point per piece spreads it with the same measure and
-        # first moments as the degree-5 rule, at a seventh of the points (the ball at h = 1/32: 1.7 M)
+        # the gap is a uniform traction: one point per facet and lattice box spreads it with the
+        # same measure and first moments as the degree-5 rule on every cut piece
         x, w, n = surface_quadrature(pieces, h, centroids=True, lattice=np.asarray(self.grid.origin, dtype=float))
         if w.sum() <= 0:
             return None

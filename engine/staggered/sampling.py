@@ -15,13 +15,16 @@ constant traction keeps its total force. The points' pieces must be cut at the p
 apart (``boundary.surface_quadrature``'s ``lattice``), where psi jumps.
 
 Renormalising over the active samples moves a point's force to where they are, so at cut cells
-the load's moment is off by O(h F). Every body's load therefore gets the self-equilibrated couple
-that restores its first moments (``_moment_couple``): the discrete load has the quadrature's net
-force *and* net moment. A body held by nothing needs it to be solvable (a load that balances on
+the load's torque is off by O(h F). Every body's loads therefore get one self-equilibrated couple
+that restores their net torque (``_torque_couple``): the discrete load has the quadrature's net
+force *and* net torque. A body held by nothing needs it to be solvable (a load that balances on
 the surface balances on the samples); a held one needs it to be loaded along the right line: a
 bar pulled at an end face whose sides cut cells (fill 0.8 / 0.2 and 0.9 / 0.1) took the
 renormalised load 0.01 h off its axis and bent, its strain off by 4.3e-2 at 4 cells across and
-1.1e-2 at 8 (1.1e-3 and 1.4e-4 with the couple; tests/test_staggered_verification.py).
+1.1e-2 at 8 (1.1e-3 and 1.4e-4 with the couple; tests/test_staggered_verification.py). Only the
+torque: a couple per load that restored the whole first-moment tensor also undid the energy's own
+force where corner edges are pruned (a box on grid planes under a general constant stress: 0.38
+of it off, 4e-15 with the torque alone).
 
 Surface quadrature and the tractions of boundary conditions are the method-neutral
 ``engine.boundary``'s.
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,7 +52,7 @@ Active = Callable[[int, np.ndarray], np.ndarray]
 # belongs to, 0 where none; index always inside the index box.
 Bodies = Callable[[int, np.ndarray], np.ndarray]
 
-# A direction in which the samples that may take a moment couple spread less than this (second
+# A direction in which the samples that may take a torque couple spread less than this (second
 # moment per unit room, lattice units) cannot carry one: they lie in a plane (a wall thinner than
 # a cell, a load on one row of samples).
 SPREAD_CUTOFF = 1e-9
@@ -167,9 +171,54 @@ def surface_loads(
     nonzero traction component but no active sample raises an error naming ``name``.
 
     With ``bodies`` as well (the samples' body labels), each body's load also gets the couple that
-    gives it the quadrature's net moment (to round-off; unless the active samples around span too
-    little), added on the active samples within 2h of its points.
+    gives it the quadrature's net torque (:func:`point_loads`).
     """
+    return point_loads(grid, [(points, weights, tractions, normals, name)], active, bodies)
+
+
+# One load given at surface points: (points [Q, d] m, weights [Q] m^2, tractions [Q, d] Pa, unit
+# normals [Q, d] or None, name).
+PointLoad = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str]
+
+
+def point_loads(grid: Grid, loads: list[PointLoad], active: Active | None = None,
+                bodies: Bodies | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The summed load vector of several point loads, per component (index [K, d], force [K] [N]),
+    each spread as :func:`surface_loads` says. With ``active`` and ``bodies`` every body gets one
+    self-equilibrated couple for all its loads together that restores the quadrature's net torque
+    (:func:`_torque_balanced`)."""
+    d = grid.dim
+    balance = active is not None and bodies is not None
+    out, spreads = [], []
+    for a in range(d):
+        parts = [_spread(grid, a, *load, active, balance) for load in loads]
+        out.append(_merged(np.concatenate([np.zeros((0, d), np.int64)] + [s.samples for s in parts]),
+                           np.concatenate([np.zeros(0)] + [s.force for s in parts])))
+        spreads += [(a, s) for s in parts]
+    return _torque_balanced(grid, spreads, out, active, bodies) if balance else out
+
+
+@dataclass(frozen=True)
+class _Spread:
+    """One point load's component a on the samples, summed per lattice cell (cells [C, d]) of its
+    points: per corner of a cell (the 2^d of :func:`_corners`) the force F_c = sum_q F_qa phi_qc [C,
+    2^d] [N] and its points' first moment sum_q F_qa phi_qc frac_q [C, 2^d, d] [N h] (so the excess
+    lever moment about the points is corner F_c - that); per cell sum_q |F_qa| [C] [N] and
+    sum_q |F_qa| xi_q [C, d] [N h] (xi: lattice coordinates); the forces per sample (samples [K, d],
+    force [K] [N]). Per cell, not per point: a fine mesh puts ~50 points in a cell."""
+
+    cells: np.ndarray
+    corner_force: np.ndarray
+    corner_moment: np.ndarray
+    size: np.ndarray
+    size_moment: np.ndarray
+    samples: np.ndarray
+    force: np.ndarray
+
+
+def _spread(grid: Grid, a: int, points: np.ndarray, weights: np.ndarray, tractions: np.ndarray,
+            normals: np.ndarray | None, name: str, active: Active | None, moments: bool = False) -> _Spread:
+    """``moments``: also the cells' moments the torque couple needs (else those arrays are empty)."""
     points = np.asarray(points, dtype=float)
     weights = np.asarray(weights, dtype=float)
     tractions = np.asarray(tractions, dtype=float)
@@ -179,45 +228,49 @@ def surface_loads(
             f"{name}: expected weights [{len(points)}] and tractions [{len(points)}, {d}], "
             f"got {weights.shape} and {tractions.shape}"
         )
-    loads = []
     corners = _corners(d)
     k = len(corners)
-    for a in range(d):
-        # Surface points far outnumber the cells they cross (~50 per cell on a fine mesh): samples are
-        # looked up, and forces gathered, per (cell, corner) slot, never per (point, corner) entry.
-        base, frac = _lattice(grid, points, a)
-        phi = _corner_weights(frac) if normals is None else _energy_weights(frac, normals)  # [N, 2^d]
-        cells, cell_of = _unique_rows(base)
-        near = cells[:, None, :] + corners[None]  # [C, 2^d, d]: the samples of each cell
-        load = weights * tractions[:, a]
-        if active is not None:
-            is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
-            phi = _restricted(phi, is_active[cell_of], a, load, name)
-        slot = (cell_of[:, None] * k + np.arange(k)).ravel()
-        keep = phi.ravel() > 0
-        summed = np.bincount(slot[keep], weights=(load[:, None] * phi).ravel()[keep], minlength=len(cells) * k)
-        used = np.bincount(slot[keep], minlength=len(cells) * k) > 0
-        samples, inverse = _unique_rows(near.reshape(-1, d)[used])
-        force = np.bincount(inverse, weights=summed[used], minlength=len(samples))
-        if active is not None and bodies is not None:
-            samples, force = _balanced(grid, load, a, (cells, cell_of, frac, phi), (samples, force), active, bodies)
-        loads.append((samples, force))
-    return loads
+    # Surface points far outnumber the cells they cross (~50 per cell on a fine mesh): samples are
+    # looked up, and forces gathered, per (cell, corner) slot, never per (point, corner) entry.
+    base, frac = _lattice(grid, points, a)
+    phi = _corner_weights(frac) if normals is None else _energy_weights(frac, normals)  # [N, 2^d]
+    cells, cell_of = _unique_rows(base)
+    near = cells[:, None, :] + corners[None]  # [C, 2^d, d]: the samples of each cell
+    load = weights * tractions[:, a]
+    if active is not None:
+        is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
+        phi = _restricted(phi, is_active[cell_of], a, load, name)
+    slot = (cell_of[:, None] * k + np.arange(k)).ravel()
+    entry = load[:, None] * phi  # [N, 2^d]
+    summed = np.bincount(slot, weights=entry.ravel(), minlength=len(cells) * k)
+    moment, size, size_moment = np.zeros((0, k, d)), np.zeros(0), np.zeros((0, d))
+    if moments:
+        moment = np.stack([np.bincount(slot, weights=(entry * frac[:, b, None]).ravel(), minlength=len(cells) * k)
+                           if b != a else np.zeros(len(cells) * k) for b in range(d)], axis=1).reshape(len(cells), k, d)
+        size = np.bincount(cell_of, weights=np.abs(load), minlength=len(cells))
+        size_moment = np.stack([np.bincount(cell_of, weights=np.abs(load) * (base[:, b] + frac[:, b]),
+                                            minlength=len(cells)) for b in range(d)], axis=1)
+    used = np.bincount(slot[phi.ravel() > 0], minlength=len(cells) * k) > 0
+    samples, force = _merged(near.reshape(-1, d)[used], summed[used])
+    return _Spread(cells, summed.reshape(len(cells), k), moment, size, size_moment, samples, force)
 
 
 def _energy_weights(frac: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Weights [N, 2^d] of the corners of :func:`_corners` at offsets frac [N, d] of points with unit
-    normals [N, d]: sum_j n_j^2 times the hat along j and, along every other axis, the nearer sample."""
+    normals [N, d]: sum_j n_j^2 times the hat along j and, along every other axis, the nearer sample.
+    Each j's term sits on two corners, so it is added there alone (the outer products over all 2^d
+    corners took 0.7 s for a sphere's 1.3 M points)."""
     n, d = frac.shape
-    hat = [np.stack([1.0 - frac[:, b], frac[:, b]], axis=1) for b in range(d)]
-    nearest = [np.stack([frac[:, b] < 0.5, frac[:, b] >= 0.5], axis=1).astype(float) for b in range(d)]
-    out = np.zeros((n, 2**d))
+    bit = 2 ** (d - 1 - np.arange(d))  # a corner's number is sum_b bit_b (0 or 1 along b)
+    upper = (frac >= 0.5).astype(np.int64) * bit
+    start = np.arange(n) * 2**d + upper.sum(axis=1)
+    slots, values = [], []
     for j in range(d):
-        psi = np.ones((n,) + (1,) * d)
-        for b in range(d):
-            psi = psi * (hat[b] if b == j else nearest[b]).reshape((n,) + (1,) * b + (2,) + (1,) * (d - 1 - b))
-        out += normals[:, j, None] ** 2 * psi.reshape(n, 2**d)
-    return out
+        lower = start - upper[:, j]  # the nearer samples across j, the lower one along j
+        weight = normals[:, j] ** 2
+        slots += [lower, lower + bit[j]]
+        values += [weight * (1.0 - frac[:, j]), weight * frac[:, j]]
+    return np.bincount(np.concatenate(slots), weights=np.concatenate(values), minlength=n * 2**d).reshape(n, 2**d)
 
 
 def renormalised(phi: np.ndarray, is_active: np.ndarray) -> np.ndarray:
@@ -242,63 +295,73 @@ def _restricted(phi: np.ndarray, is_active: np.ndarray, a: int, load: np.ndarray
     return renormalised(phi, is_active)
 
 
-def _balanced(grid: Grid, load: np.ndarray, a: int, spread: tuple, summed: tuple, active: Active,
-              bodies: Bodies) -> tuple[np.ndarray, np.ndarray]:
-    """(samples [K, d], force [K]) of component a with each body's moment couple added.
+def _torque_balanced(grid: Grid, spreads: list[tuple[int, _Spread]], summed: list[tuple[np.ndarray, np.ndarray]],
+                     active: Active, bodies: Bodies) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``summed`` (per component: samples [K, d], force [K]) with each body's torque couple added.
 
-    spread: the points' lattice cells (cells [C, d], cell_of [N]), offsets in them (frac [N, d]) and
-    renormalised corner weights phi [N, 2^d]; summed: their forces summed per sample. The excess
-    first moment of a body's load is sum F_q phi_qI (x_I - x_q) over its samples (positions in h);
-    the couple acts on the active samples around the same points, each point offering room |F_q|
-    spread by a hat of width 2h."""
-    cells, cell_of, frac, phi = spread
-    samples, force = summed
+    The excess first moment of a body's loads is E_ab = sum F_qa phi_qI (x_I - x_q)_b over the
+    (point q, sample I) entries whose sample is the body's (positions in h: the spread's lever
+    against the point's own); its torque is E - E^T. Only the torque is restored: for a constant
+    stress the energy's own force has the moments sigma_ab times the volume of the weights that
+    carry sigma_ab, which pruned corner edges lower for sigma_ab and sigma_ba alike
+    (docs/design-notes.md, "A traction spread as the energy takes a stress"), so restoring E's
+    symmetric part as well moved the loads away from the energy's force (a box on grid planes under
+    a general constant stress 0.38 of it off). The couple acts on the active samples around the
+    lattice cells of the body's points, each cell offering room sum |F_qa| for component a spread
+    by a hat of width 2h (:func:`_room`)."""
     d = grid.dim
     corners = _corners(d)
-    near = cells[:, None, :] + corners[None]
-    label = _read(grid, near, a, lambda c, i: (np.asarray(bodies(c, i), dtype=np.int64), np.ones(len(i), bool)))[0]
-    label = np.where(phi > 0, label.astype(np.int64)[cell_of], 0)  # [N, 2^d] per (point, corner) entry
-    if not (label > 0).any():
-        return samples, force
-    labels = np.unique(label[label > 0])
-    moment = load[:, None] * phi  # force on each (point, corner) entry; its lever is corner - frac
-    excess = np.zeros((len(labels), d))  # [bodies, d] [N h]; the lever along a does not turn f_a
-    for b in (b for b in range(d) if b != a):
-        per_label = np.bincount(label.ravel(), weights=(moment * (corners[None, :, b] - frac[:, b, None])).ravel())
-        excess[:, b] = per_label[labels]
-    size = np.abs(load).sum()
-    held = [k for k, e in zip(labels, excess) if np.abs(e).max() > ROUNDOFF_MOMENT * size]
+    labels, first, size = [], np.zeros((1, d, d)), 0.0
+    for a, s in spreads:
+        near = s.cells[:, None, :] + corners[None]
+        label = _read(grid, near, a, lambda c, i: (np.asarray(bodies(c, i), dtype=np.int64), np.ones(len(i), bool)))[0]
+        label = label.astype(np.int64)  # [C, 2^d]: the body of each cell's corner sample, 0 for none
+        labels.append(label)
+        top = int(label.max(initial=0)) + 1
+        if top > len(first):
+            first = np.concatenate([first, np.zeros((top - len(first), d, d))])
+        for b in (b for b in range(d) if b != a):
+            lever = corners[None, :, b] * s.corner_force - s.corner_moment[:, :, b]
+            first[:top, a, b] += np.bincount(label.ravel(), weights=lever.ravel(), minlength=top)
+        size += s.size.sum()
+    torque = first - first.transpose(0, 2, 1)
+    held = [k for k in range(1, len(torque)) if np.abs(torque[k]).max() > ROUNDOFF_MOMENT * size]
     if not held:
-        return samples, force
-    rows = np.nonzero(np.isin(label, held).any(axis=1))[0]
-    xi = cells[cell_of] + frac  # lattice coordinates [N, d] (exact: frac = xi - floor(xi))
-    room_index, room = _room(grid, xi, load, a, rows, active)
-    room_label = np.asarray(bodies(a, room_index), dtype=np.int64)
-    out_index, inverse = _unique_rows(np.concatenate([samples, room_index]))
-    out = np.bincount(inverse[: len(samples)], weights=force, minlength=len(out_index))
+        return summed
+    rooms = [[np.zeros((0, d), np.int64)] for _ in range(d)], [[np.zeros(0)] for _ in range(d)]
+    for (a, s), label in zip(spreads, labels):
+        mine = np.nonzero(np.isin(label, held).any(axis=1) & (s.size > 0))[0]
+        if len(mine):
+            i, r = _room(grid, s.cells[mine], s.size[mine], s.size_moment[mine] / s.size[mine, None], a, active)
+            rooms[0][a].append(i)
+            rooms[1][a].append(r)
+    rooms = [_merged(np.concatenate(i), np.concatenate(r)) for i, r in zip(*rooms)]  # neighbours' rooms overlap
+    rooms = [(i, r, np.asarray(bodies(a, i), dtype=np.int64)) for a, (i, r) in enumerate(rooms)]
+    couples = [np.zeros(len(r)) for _, r, _ in rooms]
     for k in held:
-        mine = room_label == k
-        couple = _moment_couple(room_index[mine].astype(float), room[mine], excess[labels == k][0], a)
-        np.add.at(out, inverse[len(samples):][mine], couple)
-    keep = (np.bincount(inverse[: len(samples)], minlength=len(out_index)) > 0) | (out != 0)
-    return out_index[keep], out[keep]
+        mine = [label == k for _, _, label in rooms]
+        forces = _torque_couple([(i[m].astype(float), r[m]) for (i, r, _), m in zip(rooms, mine)], torque[k])
+        for a in range(d):
+            couples[a][mine[a]] += forces[a]
+    out = []
+    for a, ((samples, force), (index, _, _)) in enumerate(zip(summed, rooms)):
+        out_index, inverse = _unique_rows(np.concatenate([samples, index]))
+        total = np.bincount(inverse[: len(samples)], weights=force, minlength=len(out_index))
+        np.add.at(total, inverse[len(samples):], couples[a])
+        keep = (np.bincount(inverse[: len(samples)], minlength=len(out_index)) > 0) | (total != 0)
+        out.append((out_index[keep], total[keep]))
+    return out
 
 
-def _room(grid: Grid, xi: np.ndarray, load: np.ndarray, a: int, rows: np.ndarray,
+def _room(grid: Grid, cells: np.ndarray, force: np.ndarray, mean: np.ndarray, a: int,
           active: Active) -> tuple[np.ndarray, np.ndarray]:
-    """Where a couple may act for the points ``rows``: the active samples among the 4^d around
-    each lattice cell they lie in (offsets -1..2 from it), the cell offering its points' summed
-    |force| [N] spread by a hat of width 2h about their |force|-weighted mean position (zero at the
-    neighbourhood's edge, so samples enter it continuously). Per cell, not per point: a fine mesh
-    puts ~50 points in a cell, and per point this took 2.4 of the 4.1 s of a 3/4-sphere traction's
-    load vector at h = 1/96. Returns the distinct samples (index [K, d]) and their room [K] [N]."""
+    """Where a couple may act around lattice cells [C, d] of points whose summed |force| is ``force``
+    [C] [N] about their |force|-weighted mean position ``mean`` [C, d] (lattice coordinates): the
+    active samples among the 4^d around each cell (offsets -1..2 from it), the cell's force spread
+    over them by a hat of width 2h about the mean (zero at the neighbourhood's edge, so samples enter
+    it continuously). Returns the samples (index [K, d], repeats possible) and their room [K] [N]."""
     d = grid.dim
     around = np.array(list(itertools.product((-1, 0, 1, 2), repeat=d)), dtype=np.int64)  # [4^d, d]
-    base = np.floor(xi[rows]).astype(np.int64)
-    cells, cell_of = _unique_rows(base)
-    force = np.bincount(cell_of, weights=np.abs(load[rows]), minlength=len(cells))
-    mean = np.stack([np.bincount(cell_of, weights=np.abs(load[rows]) * xi[rows, k], minlength=len(cells))
-                     for k in range(d)], axis=1) / np.where(force > 0, force, 1.0)[:, None]
     near = cells[:, None, :] + around[None]
     is_active = _read(grid, near, a, lambda c, i: (np.zeros(len(i)), active(c, i)))[1]
     hat = np.clip(1.0 - 0.5 * np.abs(near - mean[:, None, :]), 0.0, None).prod(axis=2) * is_active
@@ -307,21 +370,44 @@ def _room(grid: Grid, xi: np.ndarray, load: np.ndarray, a: int, rows: np.ndarray
     return near[on], room[on]
 
 
-def _moment_couple(x: np.ndarray, room: np.ndarray, excess: np.ndarray, a: int) -> np.ndarray:
-    """Forces [K] [N] on component-a samples at lattice positions x [K, d] (repeats allowed) that sum
-    to zero and whose first moments along the axes b != a are -excess[b] [N h]:
-    ``room * (beta . (x - xbar))``, the smallest such forces in the room-weighted norm (room [K] >= 0
-    [N]: how much force each may take). A moment along a direction in which the samples with room do
-    not spread (second moment below SPREAD_CUTOFF) is left."""
-    if room.sum() <= 0:
-        return np.zeros(len(x))
-    xbar = room @ x / room.sum()
-    transverse = np.arange(x.shape[1]) != a  # the moment of f_a needs only its lever across a
-    xc = (x - xbar)[:, transverse]
-    e, v = np.linalg.eigh(np.einsum("k,ki,kj->ij", room, xc, xc))
-    keep = e > SPREAD_CUTOFF * room.sum()
-    beta = v[:, keep] @ ((v[:, keep].T @ -excess[transverse]) / e[keep])
-    return room * (xc @ beta)
+def _merged(index: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct rows of index [n, d] and the sums of ``values`` [n] over each."""
+    rows, inverse = _unique_rows(index)
+    return rows, np.bincount(inverse, weights=values, minlength=len(rows))
+
+
+def _torque_couple(rooms: list[tuple[np.ndarray, np.ndarray]], torque: np.ndarray) -> list[np.ndarray]:
+    """Forces [K_a] [N] per component a on samples at lattice positions x_a [K_a, d] (repeats allowed;
+    ``rooms[a]`` = (x_a, room_a), room_a >= 0 [N]: how much force each may take) that sum to zero per
+    component and whose torque, sum g_a x_b - g_b x_a, is -torque[a, b] [N h] (torque antisymmetric):
+    the smallest such forces in the room-weighted norm, g_a = room_a (Lambda_a . (x_a - xbar_a)) with
+    Lambda antisymmetric. Torque about directions in which the samples with room do not spread
+    (eigenvalues of the constraints' Gram matrix below SPREAD_CUTOFF times the room) is left."""
+    d = torque.shape[0]
+    pairs = list(itertools.combinations(range(d), 2))
+    centred, second = [], []
+    for x, room in rooms:
+        xbar = room @ x / room.sum() if room.sum() > 0 else np.zeros(d)
+        centred.append(x - xbar)
+        second.append(((x - xbar) * room[:, None]).T @ (x - xbar))
+
+    def constraints(lam: np.ndarray) -> np.ndarray:
+        # the torques sum_k g_ak x_kb - g_bk x_ka of the forces a multiplier vector ``lam`` [pairs] gives
+        big = np.zeros((d, d))
+        for (a, b), v in zip(pairs, lam):
+            big[a, b], big[b, a] = v, -v
+        moments = np.stack([big[a] @ second[a] for a in range(d)])  # [a, b] = sum_k g_ak x_kb
+        return np.array([moments[a, b] - moments[b, a] for a, b in pairs])
+
+    gram = np.stack([constraints(e) for e in np.eye(len(pairs))], axis=1)
+    e, v = np.linalg.eigh(0.5 * (gram + gram.T))
+    keep = e > SPREAD_CUTOFF * sum(r.sum() for _, r in rooms)
+    want = -np.array([torque[a, b] for a, b in pairs])
+    lam = v[:, keep] @ ((v[:, keep].T @ want) / e[keep])
+    big = np.zeros((d, d))
+    for (a, b), value in zip(pairs, lam):
+        big[a, b], big[b, a] = value, -value
+    return [room * (xc @ big[a]) for a, ((_, room), xc) in enumerate(zip(rooms, centred))]
 
 
 def _unique_rows(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
