@@ -409,12 +409,12 @@ def surface_quadrature(facets: np.ndarray, spacing: float, centroids: bool = Fal
     (``subdivision.lattice_pieces``), so each lies in one box of them; on each piece a
     degree-5 Gauss rule (3-point Gauss-Legendre / 7-point Radon-Dunavant) integrates, or with
     ``centroids`` the one-point rule (exact for linear integrands: the measure and first moments
-    of each piece; with ``lattice``, one point for all of a facet's pieces in a box). With ``merge``, pieces no longer than CLUSTER ``spacing`` (a mesh finer than the
-    grid) are merged into clusters of that side, each with a rule exact to its second moments
-    (:mod:`engine.clusters`): points follow the grid, not the triangle count. Zero-area pieces are
-    dropped. Returns points [Q, d] [m], weights [Q] [m^2 | m] (summing to the total area / length
-    to round-off) and unit outward normals [Q, d] (a cluster's: its area vector over its measure,
-    unit to O((size * curvature)^2)).
+    of each piece; with ``lattice``, one point for all of a facet's pieces in a box). With ``merge``,
+    pieces no longer than CLUSTER ``spacing`` (a mesh finer than the grid) are merged into clusters of
+    that side, each with a rule exact to its second moments (:mod:`engine.clusters`): points follow the
+    grid, not the triangle count. Zero-area pieces are dropped. Returns points [Q, d] [m], weights [Q]
+    [m^2 | m] (summing to the total area / length to round-off) and unit outward normals [Q, d] (a
+    cluster's: its area vector over its measure, unit to O((size * curvature)^2)).
     """
     facets = np.asarray(facets, dtype=float)
     if facets.ndim != 3 or facets.shape[1] != facets.shape[2] or facets.shape[2] not in (2, 3):

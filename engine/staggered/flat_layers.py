@@ -176,36 +176,78 @@ def end_loads(level: Level, weights: list[tuple[np.ndarray, np.ndarray]],
               loads: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> np.ndarray:
     """What the surface loads given at points (``loads``: (points [Q, d] m, weights [Q] m^2,
     tractions [Q, d] Pa, normals [Q, d]) each) add [d, size] [N] where a moved a-line ends: the
-    energy reaches an end row of a uniaxial sigma_aa through alpha w^a + (1 - alpha) V, alpha the mu
-    share ((d - 1) lambda + 2 mu) / (d lambda + 2 mu), while the loads' spread (sampling.py) gives it
-    by area, V; each end row gets alpha t_a h^(d-1) dw, t_a the mean traction of its cell's points.
-    The rows' sum is unchanged where the traction is uniform."""
+    correction's residual of the stress there, dw h^(d-1) 2 mu eps_aa on each end row (``load``),
+    which the loads' spread (sampling.py) does not give. 2 mu eps_aa = sigma_aa - c tr(sigma), c =
+    lambda / (d lambda + 2 mu): sigma_aa is the end face's normal traction (the mean of its points in
+    the run's end cell) and sigma_kk, k != a, that of a face normal to k at an end of the run along k
+    through the row's cell (:func:`_lateral`: the layer's own face where it is loaded); a lateral
+    stress no such face gives is taken as zero, a free face's (the uniaxial state of a bar's end).
+    The row is the one past the line's last moved cell: at the face, or a row inside where the cells
+    before the face were not flat enough to move (a rectangle's corner cells; their residual left a
+    cut rectangle under sigma_xx 5% off). The rows' sum is unchanged where the traction is uniform."""
     d, h, lay = level.dim, level.spacing, level.layout
-    lam, mu = level.lam, level.mu
-    alpha = ((d - 1) * lam + 2 * mu) / (d * lam + 2 * mu)
+    c = level.lam / (d * level.lam + 2 * level.mu)
     f = np.zeros((d, level.size))
     if not loads:
         return f
     x, w, t, n = (np.concatenate(v) for v in zip(*loads))
     cell = cells_of(level, x, n)
     eye = np.eye(d, dtype=np.int64)
+    # per cell and axis k: the area of the points on faces normal to k and their sum of w sigma_kk
+    # (t_k n_k); only such faces end a-lines as the partition assumes (a tilted face's cells would
+    # take a share of its load that the energy does not give them, and unbalance a free body)
+    area, traction, normal_stress = (np.zeros((d, level.size)) for _ in range(3))
+    for k in range(d):
+        ok = (cell >= 0) & (np.abs(n[:, k]) > NORMAL)
+        area[k] = np.bincount(cell[ok], weights=w[ok], minlength=level.size)
+        traction[k] = np.bincount(cell[ok], weights=w[ok] * t[ok, k], minlength=level.size)
+        normal_stress[k] = np.bincount(cell[ok], weights=w[ok] * t[ok, k] * np.sign(n[ok, k]),
+                                       minlength=level.size)
     for a, (pos, dw) in enumerate(weights):
         if not len(pos):
             continue
-        # only the faces normal to a end a-lines as the partition assumes (a tilted face's cells would
-        # take a share of its load that the energy does not give them, and unbalance a free body)
-        ok = (cell >= 0) & (np.abs(n[:, a]) > NORMAL)
-        area = np.bincount(cell[ok], weights=w[ok], minlength=level.size)
-        traction = np.bincount(cell[ok], weights=w[ok] * t[ok, a], minlength=level.size)[pos]
-        mean = np.where(area[pos] > 0, traction / np.maximum(area[pos], 1e-300), 0.0)
         index = lay.index_of(pos).astype(np.int64)
+        moved = np.zeros(level.size, dtype=bool)
+        moved[pos[dw != 0]] = True
         for sign, face in ((1, eye[a]), (-1, 0 * eye[a])):
-            end = (fills_at(level, index + sign * eye[a]) <= 0.0) & (area[pos] > 0)
+            # the row past the last moved cell: at the face, or inside where the cells before the
+            # face were not flat enough to move (a rectangle's corner cells)
+            after = lay.positions(index + sign * eye[a])
+            end = ((after < 0) | ~moved[np.maximum(after, 0)]) & (dw != 0)
+            # sigma_aa = sign t_a, t_a the mean traction of the face's points in the run's end cell
+            at = np.full(len(pos), -1)
+            at[end] = lay.positions(run_ends(level, index[end], a)[2][(sign + 1) // 2])
+            end &= (at >= 0) & (area[a, np.maximum(at, 0)] > 0)
+            at = at[end]
+            mean = traction[a, at] / area[a, at]
             rows = lay.positions(index[end] + face)
             # per face plane, only where the weights moved within the plane sum to zero (a face's
             # layers, donors and receivers both end there): else a free body's loads lose balance
             _, plane = np.unique(index[end, a], return_inverse=True)
-            whole = (np.abs(np.bincount(plane, weights=dw[end])) <= 1e-9 * np.bincount(plane, weights=np.abs(dw[end])))[plane]
+            net, size = np.bincount(plane, weights=dw[end]), np.bincount(plane, weights=np.abs(dw[end]))
+            whole = (np.abs(net) <= 1e-9 * size)[plane]
             good = (rows >= 0) & whole
-            np.add.at(f[a], rows[good], (alpha * h ** (d - 1) * mean[end] * dw[end])[good])
+            # the high end's row takes +dw 2 mu eps_aa, the low end's -dw 2 mu eps_aa
+            two_mu_eps = sign * mean - c * (sign * mean + _lateral(level, index[end], a, area, normal_stress))
+            np.add.at(f[a], rows[good], (sign * h ** (d - 1) * two_mu_eps * dw[end])[good])
     return f
+
+
+def _lateral(level: Level, index: np.ndarray, a: int, area: np.ndarray, normal_stress: np.ndarray) -> np.ndarray:
+    """sum over k != a of sigma_kk [Pa] at cells ``index`` [N, d]: along k, the normal traction of
+    the nearer end of the run of material through each cell that holds points of a face normal to k
+    (``area`` [d, size] of such points per cell, ``normal_stress`` [d, size] their sum of w sigma_kk),
+    else of the farther; zero where neither end has any (a free or held face)."""
+    lay = level.layout
+    out = np.zeros(len(index))
+    for k in (k for k in range(level.dim) if k != a):
+        _, _, (low, high) = run_ends(level, index, k)
+        low_first = (index[:, k] - low[:, k] <= high[:, k] - index[:, k])[:, None]
+        found = np.zeros(len(index), dtype=bool)
+        for end in (np.where(low_first, low, high), np.where(low_first, high, low)):
+            p = lay.positions(end)
+            here = ~found & (p >= 0)
+            here[here] = area[k, p[here]] > 0
+            out[here] += normal_stress[k, p[here]] / area[k, p[here]]
+            found |= here
+    return out
