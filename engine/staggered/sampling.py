@@ -205,7 +205,7 @@ class _Spread:
     2^d] [N] and its points' first moment sum_q F_qa phi_qc frac_q [C, 2^d, d] [N h] (so the excess
     lever moment about the points is corner F_c - that); per cell sum_q |F_qa| [C] [N] and
     sum_q |F_qa| xi_q [C, d] [N h] (xi: lattice coordinates); the forces per sample (samples [K, d],
-    force [K] [N]). Per cell, not per point: a fine mesh puts ~50 points in a cell."""
+    force [K] [N]). Per cell, not per point: a mesh finer than the grid puts many points in a cell."""
 
     cells: np.ndarray
     corner_force: np.ndarray
@@ -391,22 +391,22 @@ def _torque_couple(rooms: list[tuple[np.ndarray, np.ndarray]], torque: np.ndarra
         centred.append(x - xbar)
         second.append(((x - xbar) * room[:, None]).T @ (x - xbar))
 
-    def constraints(lam: np.ndarray) -> np.ndarray:
-        # the torques sum_k g_ak x_kb - g_bk x_ka of the forces a multiplier vector ``lam`` [pairs] gives
+    def multipliers(lam: np.ndarray) -> np.ndarray:  # Lambda [d, d] of one value per pair (a < b)
         big = np.zeros((d, d))
         for (a, b), v in zip(pairs, lam):
             big[a, b], big[b, a] = v, -v
-        moments = np.stack([big[a] @ second[a] for a in range(d)])  # [a, b] = sum_k g_ak x_kb
+        return big
+
+    def constraints(lam: np.ndarray) -> np.ndarray:
+        # the torques sum_k g_ak x_kb - g_bk x_ka of the forces the multipliers ``lam`` [pairs] give
+        moments = np.stack([multipliers(lam)[a] @ second[a] for a in range(d)])  # [a, b] = sum_k g_ak x_kb
         return np.array([moments[a, b] - moments[b, a] for a, b in pairs])
 
     gram = np.stack([constraints(e) for e in np.eye(len(pairs))], axis=1)
     e, v = np.linalg.eigh(0.5 * (gram + gram.T))
     keep = e > SPREAD_CUTOFF * sum(r.sum() for _, r in rooms)
     want = -np.array([torque[a, b] for a, b in pairs])
-    lam = v[:, keep] @ ((v[:, keep].T @ want) / e[keep])
-    big = np.zeros((d, d))
-    for (a, b), value in zip(pairs, lam):
-        big[a, b], big[b, a] = value, -value
+    big = multipliers(v[:, keep] @ ((v[:, keep].T @ want) / e[keep]))
     return [room * (xc @ big[a]) for a, ((_, room), xc) in enumerate(zip(rooms, centred))]
 
 
