@@ -33,7 +33,7 @@ from ..solvers.cg import PCG, SolverError, pcg
 from ..solvers.rigid import check_balance, free_modes
 from . import kernels, sampling
 from .fields import StaggeredFields
-from .joined import JOINED, joined_bodies_warning
+from .joined import JOINED, close_bodies_warning, joined_bodies_warning
 from .layers import partial_layer_warning
 from .multigrid import Multigrid
 from . import flat_layers, held
@@ -168,7 +168,7 @@ class StaggeredElasticity(StaggeredFields):
         self.warnings += thin_solid_warning(self.surface, grid.spacing)
         self.warnings += partial_layer_warning(level, np.unique(np.concatenate([p for p, _ in self._flat])))
         joined = joined_bodies_warning(self.surface, level, grid)
-        self.warnings += joined
+        self.warnings += joined + close_bodies_warning(level)
         self.dof_body = dof_bodies(level, self.dof_comp, self.dof_pos)  # [DOFs] body label (1, 2, ...)
         self.modes = self._floating_modes(points)
         self.loads = self._load_vector(points)
@@ -252,11 +252,16 @@ class StaggeredElasticity(StaggeredFields):
             else:
                 pts, w, t, normals = self._load_points[id(load)]
             pieces.append((pts, w, t, normals, load.name))
+        # the partial layers' end loads (no pieces, no end loads) join the spread: the couple that
+        # gives each body the quadrature's torque undoes theirs too (two cubes sharing cells were
+        # refused as unbalanced by the torque of their end rows alone)
+        end = flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
         if pieces:
-            spread = sampling.point_loads(grid, pieces, self._active_lookup, self._body_lookup())
+            rows = [np.nonzero(end[a])[0] for a in range(d)]
+            fixed = [(level.layout.index_of(r).astype(np.int64), end[a, r]) for a, r in enumerate(rows)]
+            spread = sampling.point_loads(grid, pieces, self._active_lookup, self._body_lookup(), fixed)
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
-        f += flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f

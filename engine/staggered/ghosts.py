@@ -23,10 +23,12 @@ on it would move it at once. It is given the mass of the material its tying edge
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.ndimage as ndi
 
 from . import kernels
 from .layout import TileLayout
@@ -46,32 +48,72 @@ def _tying_edges(d: int, a: int) -> Iterator[tuple[int, int, tuple[int, int]]]:
             yield q, b, (1, 1)
 
 
-def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: list[np.ndarray]) -> np.ndarray:
+def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray,
+                candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Active faces [d, size] bool: those beside material (a cell on either side holds some), and
     the ``candidates`` (per component a [k, d] sample indices) that share an edge holding material
-    (ve > 0) with three active samples; a candidate no edge ties stays out."""
+    (ve > 0) with three active samples; a candidate no edge ties stays out, and so does one whose
+    edges hold material of two bodies (:func:`_one_body`). Also the positions [k, d] (grid index
+    units, the samples' own) of the candidates left out for that."""
     d = layout.dim
     active = _beside_material(layout, vc)
     eye = np.eye(d, dtype=np.int64)
+    bodies = None
 
     def on(a: int, index: np.ndarray) -> np.ndarray:
         p = layout.positions(index)
         return (p >= 0) & active[a, np.maximum(p, 0)]
 
-    extra = []
+    extra, apart = [], [np.zeros((0, d))]
     for a, cand in enumerate(candidates):
         p = layout.positions(cand)
         cand = cand[(p >= 0) & ~active[a, np.maximum(p, 0)]]
-        tied = np.zeros(len(cand), dtype=bool)
-        for q, b, (shift, other) in _tying_edges(d, a):
+        tied = np.zeros((len(cand), 2 * (d - 1)), dtype=bool)
+        for j, (q, b, (shift, other)) in enumerate(_tying_edges(d, a)):
             edge = cand + shift * eye[b]
             pe = layout.positions(edge)
-            tied |= ((pe >= 0) & (ve[q, np.maximum(pe, 0)] > 0) & on(a, cand + other * eye[b])
-                     & on(b, edge) & on(b, edge - eye[a]))
-        extra.append((a, layout.positions(cand[tied])))
+            tied[:, j] = ((pe >= 0) & (ve[q, np.maximum(pe, 0)] > 0) & on(a, cand + other * eye[b])
+                          & on(b, edge) & on(b, edge - eye[a]))
+        keep = tied.any(axis=1)
+        if keep.any():
+            if bodies is None:
+                bodies = _cell_bodies(layout, vc)
+            one = _one_body(layout, bodies, a, cand[keep], tied[keep])
+            apart.append(cand[keep][~one] + 0.5 - 0.5 * eye[a])
+            keep[keep] = one
+        extra.append((a, layout.positions(cand[keep])))
     for a, p in extra:
         active[a, p] = True
-    return active
+    return active, np.concatenate(apart)
+
+
+def _cell_bodies(layout: TileLayout, vc: np.ndarray) -> np.ndarray:
+    """Body label [size] of every cell: its connected component of material cells (edge
+    connectivity, as ``operator.dof_bodies``), 0 without material."""
+    d = layout.dim
+    labels, _ = ndi.label(layout.dense(vc) > 0, structure=ndi.generate_binary_structure(d, 2))
+    return layout.flat(labels.astype(np.int32))
+
+
+def _one_body(layout: TileLayout, bodies: np.ndarray, a: int, cand: np.ndarray, tied: np.ndarray) -> np.ndarray:
+    """Whether the tying edges (``tied`` [k, edges] of :func:`_tying_edges`) of samples (a, ``cand``
+    [k, d]) hold the material of one body only. A ghost between two bodies less than two cells apart
+    would couple them through its shear edges, in some motions and not others: two squares 1.44 cells
+    apart then had neither one body's rigid modes nor two's (one relative motion costs energy, one
+    does not), and a free pair was refused as unbalanced. Each edge's four cells touch along it, so
+    its material is one body's."""
+    d = layout.dim
+    eye = np.eye(d, dtype=np.int64)
+    low = np.full(len(cand), np.iinfo(np.int32).max)
+    high = np.zeros(len(cand), dtype=np.int64)
+    for j, (_, b, (shift, _)) in enumerate(_tying_edges(d, a)):
+        edge = cand + shift * eye[b]
+        for sa, sb in itertools.product((0, 1), repeat=2):  # the edge's four cells
+            p = layout.positions(edge - sa * eye[a] - sb * eye[b])
+            label = np.where(tied[:, j] & (p >= 0), bodies[np.maximum(p, 0)], 0)
+            low = np.where(label > 0, np.minimum(low, label), low)
+            high = np.maximum(high, label)
+    return (high == 0) | (low == high)
 
 
 def ghost_inertia(level: Level) -> np.ndarray:

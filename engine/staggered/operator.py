@@ -87,6 +87,7 @@ class Level:
         self.origin: tuple[float, ...] | None = None  # [m] position of index 0's cell corner, when known
         self.mass = None  # [d, size] rho h^d Vf, built only when a shift (dynamics) is set
         self.ghost_inertia = None  # [d, size] the mass fractions of ghost samples (ghosts.ghost_inertia)
+        self.ghosts_apart = None  # [k, d] positions (grid index units) of ghosts left out between bodies
         self.surface = None  # the Nitsche terms of displacement boundaries (nitsche.SurfaceOperator)
         self.hold = None  # their patches (nitsche.HoldPatches), for the coarser levels
         self.set_free(self.active)
@@ -517,10 +518,11 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     vf[vf > 1.0 - ROUNDOFF] = 1.0
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
     vc, ve = _snap(vc), _snap(ve)
-    active = ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else None
+    active, apart = ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else (None, None)
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype, active)
     if ghosts is not None:
         level.ghost_inertia = ghost_inertia(level)
+        level.ghosts_apart = apart
     level.slivers = slivers
     level.origin = tuple(float(o) for o in grid.origin)
     return level
