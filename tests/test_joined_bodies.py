@@ -104,8 +104,9 @@ def _constant_stress_job(d: int, sigma, geometry: dict, grid: dict) -> dict:
 
 def test_free_cubes_sharing_cells_are_loaded_in_balance():
     """Two free cubes 0.94 cells apart under a constant stress, joined through the cells they share:
-    the partial layers' end loads gave them a torque of 1e-8 N m (of a 0.02 N load), refused as
-    unbalanced; the body's torque couple now undoes it."""
+    the partial layers' end loads, given at each moved line's ends, gave them a torque of 1e-8 N m (of
+    a 0.02 N load), refused as unbalanced; each moved cell's pair of end forces is in balance now
+    (flat_layers.end_loads)."""
     from engine import simulate
     from engine.geometry.cache import GeometryCache
 

@@ -12,7 +12,7 @@ from engine.grid import Grid
 from engine.regions import Ball, Halfspaces
 from engine.boundary import boundary_tractions, surface_quadrature
 from engine.subdivision import lattice_pieces, subdivided
-from engine.staggered.sampling import _torque_couple, interpolate, point_loads, stencil, surface_loads
+from engine.staggered.sampling import _torque_couple, interpolate, stencil, surface_loads
 from tests.conftest import polygon_surface_2d, surface_of
 
 GRIDS = {
@@ -368,40 +368,6 @@ def test_loads_on_free_rotated_bodies_keep_the_quadratures_force_and_moment(d):
     force, moment = resultant(grid, loads)
     total = 2.5e3 * weights.sum()
     assert np.abs(force).max() < 1e-12 * total and np.abs(moment).max() < 2e-12 * total
-
-
-@pytest.mark.parametrize("d", [2, 3])
-def test_fixed_forces_on_the_samples_join_the_spread_and_lose_their_torque(d):
-    """The partial layers' end loads are self-equilibrated in force, not always in torque: two free
-    cubes 0.94 cells apart (sharing cells) were refused as unbalanced by their torque alone (1e-8 N m
-    of a 0.02 N load). Given to point_loads as fixed forces, the body's couple undoes it."""
-    grid, surface = rotated_bodies(d)
-    active = activity(surface, grid)
-
-    def bodies(a, index):
-        return np.where(active(a, index), 1 + (grid.sample_points(index, np.eye(d)[a])[:, 0] > 1.0), 0)
-
-    points, weights, _ = boundary_tractions(surface, Ball(np.full(d, 0.5), 10.0), grid.spacing, pressure=-1.0,
-                                            name="all")
-    body = points[:, 0] <= 1.0
-    rng = np.random.default_rng(7)
-    tractions = np.where(body[:, None], rng.normal(size=(len(points), d)) * 1e3, 0.0)
-    scale = np.abs(weights[:, None] * tractions).sum()
-    want_force, want_moment = quadrature_resultant(points[body], weights[body], tractions[body])
-    load = [(points, weights, tractions, None, "load")]
-    fixed = []
-    for a in range(d):  # forces on four of body 1's samples, summing to zero, with a torque of ~0.3 scale h
-        index, _ = point_loads(grid, load, active)[a]
-        index = index[bodies(a, index) == 1]
-        fixed.append((index[:: len(index) // 4][:4], np.array([1.0, -1.0, 2.0, -2.0]) * 0.1 * scale))
-    plain = point_loads(grid, load, active, fixed=fixed)
-    force, moment = resultant(grid, plain)
-    np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
-    assert np.abs(moment - want_moment).max() > 1e-2 * scale * grid.spacing  # the fixed forces' torque
-    loads = point_loads(grid, load, active, bodies, fixed)
-    force, moment = resultant(grid, loads)
-    np.testing.assert_allclose(force, want_force, rtol=0, atol=1e-12 * scale)
-    np.testing.assert_allclose(moment, want_moment, rtol=0, atol=2e-12 * scale)
 
 
 @pytest.mark.parametrize("d", [2, 3])

@@ -252,16 +252,11 @@ class StaggeredElasticity(StaggeredFields):
             else:
                 pts, w, t, normals = self._load_points[id(load)]
             pieces.append((pts, w, t, normals, load.name))
-        # the partial layers' end loads (no pieces, no end loads) join the spread: the couple that
-        # gives each body the quadrature's torque undoes theirs too (two cubes sharing cells were
-        # refused as unbalanced by the torque of their end rows alone)
-        end = flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
         if pieces:
-            rows = [np.nonzero(end[a])[0] for a in range(d)]
-            fixed = [(level.layout.index_of(r).astype(np.int64), end[a, r]) for a, r in enumerate(rows)]
-            spread = sampling.point_loads(grid, pieces, self._active_lookup, self._body_lookup(), fixed)
+            spread = sampling.point_loads(grid, pieces, self._active_lookup, self._body_lookup())
             for a, (index, force) in enumerate(spread):
                 np.add.at(f[a], self.level.layout.positions(index), force)
+        f += flat_layers.end_loads(level, self._flat, list(self._load_points.values()))
         if not np.all(np.isfinite(f)):
             raise BoundaryError("loads: the load vector is not finite (check loads.gravity and the traction values)")
         return f

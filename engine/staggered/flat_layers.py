@@ -175,16 +175,18 @@ def cells_of(level: Level, points: np.ndarray, normals: np.ndarray) -> np.ndarra
 def end_loads(level: Level, weights: list[tuple[np.ndarray, np.ndarray]],
               loads: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> np.ndarray:
     """What the surface loads given at points (``loads``: (points [Q, d] m, weights [Q] m^2,
-    tractions [Q, d] Pa, normals [Q, d]) each) add [d, size] [N] where a moved a-line ends: the
-    correction's residual of the stress there, dw h^(d-1) 2 mu eps_aa on each end row (``load``),
-    which the loads' spread (sampling.py) does not give. 2 mu eps_aa = sigma_aa - c tr(sigma), c =
-    lambda / (d lambda + 2 mu): sigma_aa is the end face's normal traction (the mean of its points in
-    the run's end cell) and sigma_kk, k != a, that of a face normal to k at an end of the run along k
-    through the row's cell (:func:`_lateral`: the layer's own face where it is loaded); a lateral
-    stress no such face gives is taken as zero, a free face's (the uniaxial state of a bar's end).
-    The row is the one past the line's last moved cell: at the face, or a row inside where the cells
-    before the face were not flat enough to move (a rectangle's corner cells; their residual left a
-    cut rectangle under sigma_xx 5% off). The rows' sum is unchanged where the traction is uniform."""
+    tractions [Q, d] Pa, normals [Q, d]) each) add [d, size] [N] where weights moved: the
+    correction's residual of the stress, as :func:`load` gives it for a stress field, which the
+    loads' spread (sampling.py) does not give. Each moved cell's dw h^(d-1) 2 mu eps_aa goes to its
+    high face and minus that to its low face: along a line of equal dw only its ends keep any, and
+    where dw changes (corner cells within FLAT of their line's fill) the row between keeps the
+    difference. Every cell's pair is in balance, force and torque. 2 mu eps_aa = sigma_aa - c
+    tr(sigma), c = lambda / (d lambda + 2 mu): sigma_aa from the normal tractions of the faces that
+    end the cell's run along a (the mean of their points in the run's end cells; linear between the
+    two ends, or the one end that has any), sigma_kk, k != a, from a face normal to k at an end of
+    the run along k through the cell (:func:`_lateral`); a lateral stress no such face gives is taken
+    as zero, a free face's (the uniaxial state of a bar's end). Toward an end without such a face
+    (a hold) the row past the last moved cell takes nothing: the hold's reaction is its force."""
     d, h, lay = level.dim, level.spacing, level.layout
     c = level.lam / (d * level.lam + 2 * level.mu)
     f = np.zeros((d, level.size))
@@ -196,40 +198,40 @@ def end_loads(level: Level, weights: list[tuple[np.ndarray, np.ndarray]],
     # per cell and axis k: the area of the points on faces normal to k and their sum of w sigma_kk
     # (t_k n_k); only such faces end a-lines as the partition assumes (a tilted face's cells would
     # take a share of its load that the energy does not give them, and unbalance a free body)
-    area, traction, normal_stress = (np.zeros((d, level.size)) for _ in range(3))
+    area, normal_stress = np.zeros((d, level.size)), np.zeros((d, level.size))
     for k in range(d):
         ok = (cell >= 0) & (np.abs(n[:, k]) > NORMAL)
         area[k] = np.bincount(cell[ok], weights=w[ok], minlength=level.size)
-        traction[k] = np.bincount(cell[ok], weights=w[ok] * t[ok, k], minlength=level.size)
         normal_stress[k] = np.bincount(cell[ok], weights=w[ok] * t[ok, k] * np.sign(n[ok, k]),
                                        minlength=level.size)
     for a, (pos, dw) in enumerate(weights):
+        pos, dw = pos[dw != 0], dw[dw != 0]
         if not len(pos):
             continue
         index = lay.index_of(pos).astype(np.int64)
         moved = np.zeros(level.size, dtype=bool)
-        moved[pos[dw != 0]] = True
-        for sign, face in ((1, eye[a]), (-1, 0 * eye[a])):
-            # the row past the last moved cell: at the face, or inside where the cells before the
-            # face were not flat enough to move (a rectangle's corner cells)
-            after = lay.positions(index + sign * eye[a])
-            end = ((after < 0) | ~moved[np.maximum(after, 0)]) & (dw != 0)
-            # sigma_aa = sign t_a, t_a the mean traction of the face's points in the run's end cell
-            at = np.full(len(pos), -1)
-            at[end] = lay.positions(run_ends(level, index[end], a)[2][(sign + 1) // 2])
-            end &= (at >= 0) & (area[a, np.maximum(at, 0)] > 0)
-            at = at[end]
-            mean = traction[a, at] / area[a, at]
-            rows = lay.positions(index[end] + face)
-            # per face plane, only where the weights moved within the plane sum to zero (a face's
-            # layers, donors and receivers both end there): else a free body's loads lose balance
-            _, plane = np.unique(index[end, a], return_inverse=True)
-            net, size = np.bincount(plane, weights=dw[end]), np.bincount(plane, weights=np.abs(dw[end]))
-            whole = (np.abs(net) <= 1e-9 * size)[plane]
-            good = (rows >= 0) & whole
-            # the high end's row takes +dw 2 mu eps_aa, the low end's -dw 2 mu eps_aa
-            two_mu_eps = sign * mean - c * (sign * mean + _lateral(level, index[end], a, area, normal_stress))
-            np.add.at(f[a], rows[good], (sign * h ** (d - 1) * two_mu_eps * dw[end])[good])
+        moved[pos] = True
+        _, _, ends = run_ends(level, index, a)
+        stress, loaded = [], []
+        for end in ends:  # sigma_aa at the run's low and high end faces, where they are loaded
+            at = lay.positions(end)
+            here = (at >= 0) & (area[a, np.maximum(at, 0)] > 0)
+            at = np.maximum(at, 0)
+            stress.append(np.where(here, normal_stress[a, at] / np.where(here, area[a, at], 1.0), 0.0))
+            loaded.append(here)
+        span = (ends[1][:, a] + 1 - ends[0][:, a]).astype(float)
+        along = (index[:, a] + 0.5 - ends[0][:, a]) / span  # the cell centre's place between the end faces
+        sigma = np.where(loaded[0] & loaded[1], (1 - along) * stress[0] + along * stress[1],
+                         np.where(loaded[0], stress[0], stress[1]))
+        some = loaded[0] | loaded[1]
+        two_mu_eps = sigma - c * (sigma + _lateral(level, index, a, area, normal_stress))
+        force = np.where(some, h ** (d - 1) * two_mu_eps * dw, 0.0)
+        for sign, face, side in ((1, eye[a], 1), (-1, 0 * eye[a], 0)):
+            rows = lay.positions(index + face)
+            beyond = lay.positions(index + sign * eye[a])
+            past = (beyond < 0) | ~moved[np.maximum(beyond, 0)]
+            good = (rows >= 0) & ~(past & ~loaded[side])
+            np.add.at(f[a], rows[good], sign * force[good])
     return f
 
 

@@ -182,25 +182,20 @@ PointLoad = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str]
 
 
 def point_loads(grid: Grid, loads: list[PointLoad], active: Active | None = None,
-                bodies: Bodies | None = None,
-                fixed: list[tuple[np.ndarray, np.ndarray]] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+                bodies: Bodies | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """The summed load vector of several point loads, per component (index [K, d], force [K] [N]),
     each spread as :func:`surface_loads` says. With ``active`` and ``bodies`` every body gets one
     self-equilibrated couple for all its loads together that restores the quadrature's net torque
-    (:func:`_torque_balanced`). ``fixed`` (per component: samples [K, d], force [K] [N], summing to
-    zero per body): forces already on the samples that belong to no point, corrections of the spread
-    (``flat_layers.end_loads``); they are added, and their torque is one more excess the couple
-    undoes (the quadrature gives them none)."""
+    (:func:`_torque_balanced`)."""
     d = grid.dim
     balance = active is not None and bodies is not None
-    fixed = fixed or [(np.zeros((0, d), np.int64), np.zeros(0))] * d
     out, spreads = [], []
     for a in range(d):
         parts = [_spread(grid, a, *load, active, balance) for load in loads]
-        out.append(_merged(np.concatenate([np.zeros((0, d), np.int64), fixed[a][0]] + [s.samples for s in parts]),
-                           np.concatenate([np.zeros(0), fixed[a][1]] + [s.force for s in parts])))
+        out.append(_merged(np.concatenate([np.zeros((0, d), np.int64)] + [s.samples for s in parts]),
+                           np.concatenate([np.zeros(0)] + [s.force for s in parts])))
         spreads += [(a, s) for s in parts]
-    return _torque_balanced(grid, spreads, out, active, bodies, fixed) if balance else out
+    return _torque_balanced(grid, spreads, out, active, bodies) if balance else out
 
 
 @dataclass(frozen=True)
@@ -301,8 +296,7 @@ def _restricted(phi: np.ndarray, is_active: np.ndarray, a: int, load: np.ndarray
 
 
 def _torque_balanced(grid: Grid, spreads: list[tuple[int, _Spread]], summed: list[tuple[np.ndarray, np.ndarray]],
-                     active: Active, bodies: Bodies,
-                     fixed: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+                     active: Active, bodies: Bodies) -> list[tuple[np.ndarray, np.ndarray]]:
     """``summed`` (per component: samples [K, d], force [K]) with each body's torque couple added.
 
     The excess first moment of a body's loads is E_ab = sum F_qa phi_qI (x_I - x_q)_b over the
@@ -330,15 +324,6 @@ def _torque_balanced(grid: Grid, spreads: list[tuple[int, _Spread]], summed: lis
             lever = corners[None, :, b] * s.corner_force - s.corner_moment[:, :, b]
             first[:top, a, b] += np.bincount(label.ravel(), weights=lever.ravel(), minlength=top)
         size += s.size.sum()
-    for a, (index, force) in enumerate(fixed):
-        # no point of the quadrature stands behind these: their whole first moment is excess (lattice
-        # positions: the spreads' levers are in them, and a per-body sum of zero makes the origin moot)
-        label = np.asarray(bodies(a, index), dtype=np.int64) if len(index) else np.zeros(0, np.int64)
-        top = int(label.max(initial=0)) + 1
-        if top > len(first):
-            first = np.concatenate([first, np.zeros((top - len(first), d, d))])
-        for b in (b for b in range(d) if b != a):
-            first[:top, a, b] += np.bincount(label, weights=force * index[:, b], minlength=top)
     torque = first - first.transpose(0, 2, 1)
     held = [k for k in range(1, len(torque)) if np.abs(torque[k]).max() > ROUNDOFF_MOMENT * size]
     if not held:
