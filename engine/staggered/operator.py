@@ -517,8 +517,10 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
             layout.load(fractions.control[s], out=row)
     vf[vf > 1.0 - ROUNDOFF] = 1.0
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
+    # before the slivers are raised: a ghost tied only by edges that MIN_FRACTION would raise takes
+    # that raised stiffness in, the mesh's round-off where a face lies through samples (ghosts.py)
+    active, apart = ghost_faces(layout, vc, ve, ghosts, MIN_FRACTION) if ghosts is not None else (None, None)
     vc, ve = _snap(vc), _snap(ve)
-    active, apart = ghost_faces(layout, vc, ve, ghosts) if ghosts is not None else (None, None)
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype, active)
     if ghosts is not None:
         level.ghost_inertia = ghost_inertia(level)
