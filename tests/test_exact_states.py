@@ -64,6 +64,24 @@ def test_dg_holds_a_constant_stress_given_as_tractions_on_a_rotated_box():
         assert len(s) and np.abs(s - want).max() < 1e-6 * np.abs(sigma).max(), level  # measured 5.4e-8
 
 
+def _box_under_constant_stress(sigma: np.ndarray, size: list[float], grid: dict):
+    """The staggered result for the box [0, size] (a polygon in 2D, an STL in 3D) on ``grid`` with
+    every face pulled by sigma n, and the stress it should hold (Voigt, the result's order)."""
+    d = len(size)
+    spec = {"dimension": d, "grid": grid, "method": {"kind": "staggered", "solver": "direct"},
+            "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3},
+            "boundaries": _constant_stress(sigma, np.vstack([np.eye(d), -np.eye(d)])),
+            "solver": {"rtol": 1e-12}, "output": {"fields": ["stress"]}}
+    if d == 2:
+        r = simulate({**spec, "geometry": {"polygon": [[[0, 0], [size[0], 0], size, [0, size[1]]]]}},
+                     cache=GeometryCache(None))
+        return r, np.array([sigma[0, 0], sigma[1, 1], sigma[0, 1]])
+    box = trimesh.creation.box(bounds=[[0, 0, 0], size])
+    r = simulate({**spec, "geometry": {"mesh": "box.stl"}}, box.export(file_type="stl"), filename="box.stl",
+                 cache=GeometryCache(None))
+    return r, np.array([sigma[0, 0], sigma[1, 1], sigma[2, 2], sigma[1, 2], sigma[0, 2], sigma[0, 1]])
+
+
 @pytest.mark.parametrize("d, shear, cut", [
     (2, 0.0, False),  # measured 2.6e-15
     # on grid planes, measured 2.7e-15 and 4.3e-15; while each load's couple restored its whole first
@@ -79,22 +97,9 @@ def test_dg_holds_a_constant_stress_given_as_tractions_on_a_rotated_box():
 def test_staggered_box_holds_a_constant_stress_given_as_tractions(d, shear, cut):
     a = np.random.default_rng(4).uniform(-1e3, 1e3, (d, d))
     sigma = np.diag(a.diagonal()) + shear * (np.triu(a, 1) + np.triu(a, 1).T)
-    normals = np.vstack([np.eye(d), -np.eye(d)])
     # on grid planes: lengths that float32 (the STL) and the cell size divide exactly
     size = ([1.0, 0.6, 0.4] if cut else [1.0, 0.5, 0.25])[:d]
-    grid = {"cell_size": 0.0613} if cut and d == 2 else {"resolution": 8}
-    spec = {"dimension": d, "grid": grid, "method": {"kind": "staggered", "solver": "direct"},
-            "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3}, "boundaries": _constant_stress(sigma, normals),
-            "solver": {"rtol": 1e-12}, "output": {"fields": ["stress"]}}
-    if d == 2:
-        corners = [[0, 0], [size[0], 0], size, [0, size[1]]]
-        r = simulate({**spec, "geometry": {"polygon": [corners]}}, cache=GeometryCache(None))
-        want = np.array([sigma[0, 0], sigma[1, 1], sigma[0, 1]])
-    else:
-        box = trimesh.creation.box(bounds=[[0, 0, 0], size])
-        r = simulate({**spec, "geometry": {"mesh": "box.stl"}}, box.export(file_type="stl"), filename="box.stl",
-                     cache=GeometryCache(None))
-        want = np.array([sigma[0, 0], sigma[1, 1], sigma[2, 2], sigma[1, 2], sigma[0, 2], sigma[0, 1]])
+    r, want = _box_under_constant_stress(sigma, size, {"cell_size": 0.0613} if cut and d == 2 else {"resolution": 8})
     fills = r.volume_fraction[r.volume_fraction > 0]
     assert (fills < 0.7).any() if cut else (fills == 1.0).all()
     s = r.fields.cells["stress"].reshape(-1, len(want))
@@ -114,20 +119,8 @@ def test_staggered_box_whose_corner_cells_are_nearly_as_full_as_their_rows_holds
     sigma = (a + a.T) / 2
     h = 0.05
     # centred grids: these lengths leave margins of 0.005 h, 0.109 h and 0.3 h in the edge cells
-    size = [20 * h - 0.01 * h, 10 * h - 0.218 * h, 6 * h - 0.6 * h][:d]
-    spec = {"dimension": d, "grid": {"cell_size": h}, "method": {"kind": "staggered", "solver": "direct"},
-            "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3},
-            "boundaries": _constant_stress(sigma, np.vstack([np.eye(d), -np.eye(d)])),
-            "solver": {"rtol": 1e-12}, "output": {"fields": ["stress"]}}
-    if d == 2:
-        r = simulate({**spec, "geometry": {"polygon": [[[0, 0], [size[0], 0], size, [0, size[1]]]]}},
-                     cache=GeometryCache(None))
-        want = np.array([sigma[0, 0], sigma[1, 1], sigma[0, 1]])
-    else:
-        box = trimesh.creation.box(bounds=[[0, 0, 0], size])
-        r = simulate({**spec, "geometry": {"mesh": "box.stl"}}, box.export(file_type="stl"), filename="box.stl",
-                     cache=GeometryCache(None))
-        want = np.array([sigma[0, 0], sigma[1, 1], sigma[2, 2], sigma[1, 2], sigma[0, 2], sigma[0, 1]])
+    r, want = _box_under_constant_stress(sigma, [20 * h - 0.01 * h, 10 * h - 0.218 * h, 6 * h - 0.6 * h][:d],
+                                         {"cell_size": h})
     fills = np.unique(np.round(r.volume_fraction[r.volume_fraction > 0], 3))
     assert 0.995 in fills and 0.891 in fills and 0.887 in fills, fills
     s = r.fields.cells["stress"].reshape(-1, len(want))
@@ -136,21 +129,15 @@ def test_staggered_box_whose_corner_cells_are_nearly_as_full_as_their_rows_holds
 
 
 def test_staggered_box_with_float32_faces_through_its_samples_holds_a_constant_stress():
-    """A 1 x 0.3 x 0.3 box on a grid of 20 cells: its sides lie through cell centres, and the STL's
-    float32 0.15 (0.15000000596) leaves edges holding 1.2e-7 of their control volume beyond them,
-    which MIN_FRACTION raised to 1e-3, tying the ghost samples beyond: each shear stress came out
-    1.15e-3 off. A ghost tied only by such slivers stays out (ghosts.ghost_faces); what is left is the
-    float32 fills themselves (0.5000001: measured 2.1e-7)."""
+    """The box [0, 1] x [0, 0.3]^2 on a grid of 20 cells: its sides lie through cell centres, and the
+    STL's float32 0.3 (0.30000001) leaves edges holding 1e-7 of their control volume beyond them,
+    which MIN_FRACTION raised to 1e-3, tying the ghost samples beyond: 1.8e-3 of sigma off (the box
+    centred at the origin, its shear stresses alone: 1.15e-3). A ghost tied only by such slivers
+    stays out (ghosts.ghost_faces); what is left is the float32 fills' own: measured 3.2e-7."""
     a = np.random.default_rng(8).uniform(-1e3, 1e3, (3, 3))
     sigma = (a + a.T) / 2
-    box = trimesh.creation.box(extents=[1.0, 0.3, 0.3])
-    spec = {"grid": {"resolution": 20}, "method": {"kind": "staggered", "solver": "direct"},
-            "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3},
-            "boundaries": _constant_stress(sigma, np.vstack([np.eye(3), -np.eye(3)])),
-            "solver": {"rtol": 1e-12}, "output": {"fields": ["stress"]}, "geometry": {"mesh": "box.stl"}}
-    r = simulate(spec, box.export(file_type="stl"), filename="box.stl", cache=GeometryCache(None))
+    r, want = _box_under_constant_stress(sigma, [1.0, 0.3, 0.3], {"resolution": 20})
     assert np.isclose(r.volume_fraction[r.volume_fraction > 0].min(), 0.25, atol=1e-6)  # its edges' cells
-    want = np.array([sigma[0, 0], sigma[1, 1], sigma[2, 2], sigma[1, 2], sigma[0, 2], sigma[0, 1]])
     s = r.fields.cells["stress"].reshape(-1, 6)
     s = s[np.isfinite(s).all(axis=1)]
     assert len(s) and np.abs(s - want).max() < 1e-6 * np.abs(sigma).max(), np.abs(s - want).max() / np.abs(sigma).max()
