@@ -60,7 +60,9 @@ def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: 
     ``least``: a sliver edge's weight is raised to the operator's least (MIN_FRACTION), so a ghost it
     ties would add that stiffness; where a float32 face lies through samples (a 0.3 m box on a 0.05 m
     grid: 0.15 stored as 0.15000000596) its edges hold 1.2e-7 and each constant shear stress came out
-    1.15e-3 off. Left out, the point's weight on the ghost (as small as the sliver) is renormalised."""
+    1.15e-3 off. Left out, the point's weight on the ghost (as small as the sliver) is renormalised.
+    The caller passes the mesh's round-off: real slivers on curved holds keep their ghosts (all of
+    them below MIN_FRACTION left out, the held annulus's L1 error at N = 256 rose 8%)."""
     d = layout.dim
     active = _beside_material(layout, vc)
     eye = np.eye(d, dtype=np.int64)

@@ -94,8 +94,6 @@ def _volume_terms(facets: np.ndarray) -> np.ndarray:
     return (facets[:, 0, 0] * facets[:, 1, 1] - facets[:, 1, 0] * facets[:, 0, 1]) / 2.0
 
 
-
-
 def close_bodies_warning(level: Level) -> list[str]:
     """A warning [0 or 1] when ghost samples were left out of ``level`` (the fine level) because they
     lie between two bodies (``ghosts.ghost_faces``): the faces there act inside the solid."""
