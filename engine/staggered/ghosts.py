@@ -28,10 +28,9 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.ndimage as ndi
 
 from . import kernels
-from .layout import TileLayout
+from .layout import TileLayout, cell_bodies
 
 if TYPE_CHECKING:
     from .operator import Level
@@ -86,7 +85,7 @@ def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: 
         keep = tied.any(axis=1)
         if keep.any():
             if bodies is None:
-                bodies = _cell_bodies(layout, vc)
+                bodies = layout.flat(cell_bodies(layout, vc))
             one = _one_body(layout, bodies, a, cand[keep], tied[keep])
             apart.append(cand[keep][~one] + 0.5 - 0.5 * eye[a])
             keep[keep] = one
@@ -94,14 +93,6 @@ def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: 
     for a, p in extra:
         active[a, p] = True
     return active, np.concatenate(apart)
-
-
-def _cell_bodies(layout: TileLayout, vc: np.ndarray) -> np.ndarray:
-    """Body label [size] of every cell: its connected component of material cells (edge
-    connectivity, as ``operator.dof_bodies``), 0 without material."""
-    d = layout.dim
-    labels, _ = ndi.label(layout.dense(vc) > 0, structure=ndi.generate_binary_structure(d, 2))
-    return layout.flat(labels.astype(np.int32))
 
 
 def _one_body(layout: TileLayout, bodies: np.ndarray, a: int, cand: np.ndarray, tied: np.ndarray) -> np.ndarray:

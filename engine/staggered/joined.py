@@ -10,7 +10,6 @@ the bodies and where; it cannot tell a gap from a contact, so it says what eithe
 from __future__ import annotations
 
 import numpy as np
-import scipy.ndimage as ndi
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -20,6 +19,7 @@ from ..geometry.surface import Surface
 from ..geometry.topology import shells
 from ..grid import Grid
 from ..subdivision import subdivided
+from .layout import cell_bodies
 from .operator import Level
 
 MAX_BODIES = 500  # beyond this many separate solids (a scan's specks) the check is skipped
@@ -36,12 +36,12 @@ def joined_bodies_warning(surface: Surface, level: Level, grid: Grid) -> list[st
     if count < 2:
         return []
     facets = surface.vertices[surface.faces]
-    d, h = surface.dim, grid.spacing
+    h = grid.spacing
     volume = np.bincount(shell, weights=_volume_terms(facets), minlength=count)
     outer = np.nonzero(volume > 0)[0]
     if not 2 <= len(outer) <= MAX_BODIES:
         return []
-    labels, _ = ndi.label(level.layout.dense(level.vc_host) > 0, structure=ndi.generate_binary_structure(d, 2))
+    labels = cell_bodies(level.layout, level.vc_host)
     origin = np.asarray(grid.origin, dtype=float)
     owners: dict[int, set[int]] = {}
     points: dict[int, np.ndarray] = {}

@@ -14,6 +14,7 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.ndimage as ndi
 
 from ..blocks import BlockSparse
 
@@ -162,6 +163,14 @@ class TileLayout:
         number of every new tile followed by the old zero tile: flat arrays map by ``rows[order]``."""
         order = np.concatenate([np.nonzero(keep)[0], [self.count]])
         return make_layout(self.box, self.coords[keep]), order
+
+
+def cell_bodies(layout: TileLayout, vc: np.ndarray) -> np.ndarray:
+    """The connected bodies of material cells (``vc`` [size] > 0): a label per cell of the index box
+    (dense, int32; 1, 2, ... and 0 without material), cells joined across faces and edges (cells
+    sharing only a vertex share no term of the staggered energy)."""
+    labels, _ = ndi.label(layout.dense(vc) > 0, structure=ndi.generate_binary_structure(layout.dim, 2))
+    return labels.astype(np.int32)
 
 
 def make_layout(box: tuple[int, ...], coords: np.ndarray) -> TileLayout:
