@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..grid import Grid
 from . import kernels
 from .layout import TileLayout, cell_bodies
 
@@ -114,6 +115,14 @@ def _one_body(layout: TileLayout, bodies: np.ndarray, a: int, cand: np.ndarray, 
             low = np.where(label > 0, np.minimum(low, label), low)
             high = np.maximum(high, label)
     return (high == 0) | (low == high)
+
+
+def float32_fraction(grid: Grid) -> float:
+    """The fraction [1] of a control volume that a face's float32 round-off can fill: four units of
+    float32's last place at the grid's largest coordinate, over h (meshes arrive in float32: STL,
+    PLY, GLB)."""
+    corners = np.abs([grid.origin, np.asarray(grid.origin) + grid.spacing * np.asarray(grid.shape)])
+    return 4.0 * 2.0**-24 * float(corners.max()) / grid.spacing
 
 
 def ghost_inertia(level: Level) -> np.ndarray:

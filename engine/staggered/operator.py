@@ -20,7 +20,7 @@ from ..geometry.fractions import VolumeFractions
 from ..grid import axis_pairs
 from ..runtime import device_array, device_zeros, kernel_input, solve_float
 from . import kernels
-from .ghosts import ghost_faces, ghost_inertia
+from .ghosts import float32_fraction, ghost_faces, ghost_inertia
 from .layout import TILE, TileLayout, cell_bodies, dilate, make_layout, reorder
 
 
@@ -517,7 +517,7 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     slivers = int(np.count_nonzero((vc > 0) & (vc < MIN_FRACTION)) + np.count_nonzero((ve > 0) & (ve < MIN_FRACTION)))
     # before the slivers are raised: a ghost tied only by edges of the mesh's round-off would take
     # MIN_FRACTION's stiffness in where a face lies through samples (ghosts.py)
-    tie = min(MIN_FRACTION, _float32_fraction(grid))
+    tie = min(MIN_FRACTION, float32_fraction(grid))
     active, apart = ghost_faces(layout, vc, ve, ghosts, tie) if ghosts is not None else (None, None)
     vc, ve = _snap(vc), _snap(ve)
     level = _pruned(layout, grid.spacing, vc, ve, vf, lam, mu, dtype, active)
@@ -527,14 +527,6 @@ def make_fine_level(fractions: VolumeFractions, lam: float, mu: float, dtype: ty
     level.slivers = slivers
     level.origin = tuple(float(o) for o in grid.origin)
     return level
-
-
-def _float32_fraction(grid) -> float:
-    """The fraction [1] of a control volume that a face's float32 round-off can fill: four units of
-    float32's last place at the grid's largest coordinate, over h (meshes arrive in float32: STL,
-    PLY, GLB)."""
-    corners = np.abs([grid.origin, np.asarray(grid.origin) + grid.spacing * np.asarray(grid.shape)])
-    return 4.0 * 2.0**-24 * float(corners.max()) / grid.spacing
 
 
 def make_coarse_level(fine: Level) -> Level:
