@@ -76,18 +76,22 @@ def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: 
     for a, cand in enumerate(candidates):
         p = layout.positions(cand)
         cand = cand[(p >= 0) & ~active[a, np.maximum(p, 0)]]
-        tied = np.zeros((len(cand), 2 * (d - 1)), dtype=bool)
+        # reads: the edges that would read the ghost once it is an unknown (any material: slivers are
+        # raised, not dropped); tied: those holding more than the round-off, which make it one
+        reads = np.zeros((len(cand), 2 * (d - 1)), dtype=bool)
+        tied = np.zeros_like(reads)
         for j, (q, b, (shift, other)) in enumerate(_tying_edges(d, a)):
             edge = cand + shift * eye[b]
             pe = layout.positions(edge)
             held = ve[q, np.maximum(pe, 0)]
-            tied[:, j] = ((pe >= 0) & (held > 0) & (held >= least) & on(a, cand + other * eye[b])
-                          & on(b, edge) & on(b, edge - eye[a]))
+            reads[:, j] = ((pe >= 0) & (held > 0) & on(a, cand + other * eye[b]) & on(b, edge)
+                           & on(b, edge - eye[a]))
+            tied[:, j] = reads[:, j] & (held >= least)
         keep = tied.any(axis=1)
         if keep.any():
             if bodies is None:
                 bodies = layout.flat(cell_bodies(layout, vc))
-            one = _one_body(layout, bodies, a, cand[keep], tied[keep])
+            one = _one_body(layout, bodies, a, cand[keep], reads[keep])
             apart.append(cand[keep][~one] + 0.5 - 0.5 * eye[a])
             keep[keep] = one
         extra.append((a, layout.positions(cand[keep])))
@@ -97,8 +101,8 @@ def ghost_faces(layout: TileLayout, vc: np.ndarray, ve: np.ndarray, candidates: 
 
 
 def _one_body(layout: TileLayout, bodies: np.ndarray, a: int, cand: np.ndarray, tied: np.ndarray) -> np.ndarray:
-    """Whether the tying edges (``tied`` [k, edges] of :func:`_tying_edges`) of samples (a, ``cand``
-    [k, d]) hold the material of one body only. A ghost between two bodies less than two cells apart
+    """Whether the edges that read samples (a, ``cand`` [k, d]) (``tied`` [k, edges] of
+    :func:`_tying_edges`, slivers included) hold the material of one body only. A ghost between two bodies less than two cells apart
     would couple them through its shear edges, in some motions and not others: two squares 1.44 cells
     apart then had neither one body's rigid modes nor two's (one relative motion costs energy, one
     does not), and a free pair was refused as unbalanced. Each edge's four cells touch along it, so
