@@ -18,7 +18,7 @@ import time
 
 
 def sphere_error(nu: float, degree: int, h: float) -> dict:
-    """One free thick sphere: {"nu", "error_u", "eta", "seconds"}."""
+    """One free thick sphere: {"nu", "error_u", "eta", "eta_volumetric", "seconds"}."""
     import numpy as np
 
     from verification.problems import _shell, lame_problem, problem, relative_l2
@@ -39,7 +39,7 @@ def sphere_error(nu: float, degree: int, h: float) -> dict:
     m = DGElasticity(cut=cut, surface=surface, material=Material(1.0, nu), degree=degree, flux="ip",
                      surface_loads=[SurfaceLoad(Ball(np.zeros(3), 0.75), "inner", pressure=1.0)])
     u = m.evaluate(m.solve().u, m.locate(lame.probes), lame.probes)
-    return {"nu": nu, "error_u": relative_l2(u, lame.exact(lame.probes)), "eta": m.eta,
+    return {"nu": nu, "error_u": relative_l2(u, lame.exact(lame.probes)), "eta": m.eta, "eta_volumetric": m.eta_volumetric,
             "seconds": time.perf_counter() - t}
 
 

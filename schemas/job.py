@@ -175,7 +175,8 @@ class DGMethod(SpecModel):
     penalty: Annotated[float | None, REAL] = Field(
         None, gt=0, json_schema_extra=not_null,
         description="Penalty factor eta [-]: face weight eta*area*(1/vol- + 1/vol+); doubled until the matrix is "
-                    "positive definite. Default by degree: 2.5 (k=1), 5 (k=2); a larger eta stiffens both "
+                    "positive definite (above nu ~0.495 the volumetric terms' penalty is raised alone first, by "
+                    "1.25 up to twice eta). Default by degree: 2.5 (k=1), 5 (k=2); a larger eta stiffens both "
                     "(k=2 near curved surfaces).")
     solver: Literal["auto", "direct", "iterative"] = Field(
         "auto", description="Linear solver: 'direct' sparse Cholesky (its memory grows superlinearly), 'iterative' CG "

@@ -73,13 +73,14 @@ def face_penalty(el: Elements, eta: float) -> np.ndarray:
 
 
 def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, weights: tuple[float, float, float],
-                rest: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                rest: float = 1.0, volumetric: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Interface blocks (blocks [U, 3, 3 n, 3 n] of the side pairs (minus, minus), (plus, plus), (minus,
     plus); (plus, minus) is the last one's transpose), pick [F]): face f's blocks are blocks[pick[f]];
     faces between full cells share one reference block per axis. weights (penalty,
     consistency with the minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ.
     ``rest``: the penalty's weight on the part of the jump with zero mean over the face (its mean has
-    weight 1). Computed FACE_CHUNK faces at a time: the face integrals take half a block's memory each."""
+    weight 1). ``volumetric``: the volumetric penalty's eta over ``eta`` (its own coercivity threshold,
+    DGElasticity._raise_penalty). Computed FACE_CHUNK faces at a time: the face integrals take half a block's memory each."""
     s = 3 * basis.size
     penalty = face_penalty(el, eta)
     ref = el.reference_faces
@@ -90,7 +91,7 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     for lo in range(0, len(todo), FACE_CHUNK):
         faces = todo[lo:lo + FACE_CHUNK]
         M, N, P = face_products(el, basis, faces, rest)
-        kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(P), np.ascontiguousarray(N),
+        kernels.face_blocks(np.ascontiguousarray(M), np.ascontiguousarray(volumetric * P), np.ascontiguousarray(N),
                             el.axis[faces].astype(np.int32), np.ascontiguousarray(penalty[faces]), mu, lam, *weights,
                             blocks[lo:lo + len(faces)])
     pick = np.empty(len(el.minus), dtype=np.int64)
@@ -104,16 +105,17 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
 
 
 def nitsche_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, triangles: np.ndarray,
-                   element: np.ndarray, patches: np.ndarray, mask: np.ndarray, weights: tuple[float, float] = (1.0, 1.0)
-                   ) -> tuple[np.ndarray, np.ndarray, PatchProjection]:
+                   element: np.ndarray, patches: np.ndarray, mask: np.ndarray, weights: tuple[float, float] = (1.0, 1.0),
+                   volumetric: float = 1.0) -> tuple[np.ndarray, np.ndarray, PatchProjection]:
     """Weak Dirichlet blocks [b, 3 n, 3 n] of surface patches (one element each; ``patches`` [T]
     groups the triangles, ``mask`` [b, 3] the prescribed components; weights: penalty, consistency),
     their penalties [b] [1/m]:
     eta_b = eta area(patch) / vol(K) (eq. 20 with the outside as an element of infinite volume),
-    and the patches' projection onto degree k - 1 (the volumetric penalty's, for the load side)."""
+    and the patches' projection onto degree k - 1 (the volumetric penalty's, for the load side);
+    ``volumetric`` as in :func:`face_blocks`."""
     count = len(mask)
     Mnn, Nn, area, low = patch_products(el, basis, triangles, element, patches, count)
-    Pnn = np.einsum("bpiu,bqju->bpqij", low.R, low.R)
+    Pnn = volumetric * np.einsum("bpiu,bqju->bpqij", low.R, low.R)
     owner = np.zeros(count, dtype=np.int64)
     owner[patches] = element
     penalty = eta * area / el.volume[owner]

@@ -67,8 +67,9 @@ class BoundaryTerms:
     def _dirichlet_rhs(self, eta_b: np.ndarray, value_scale: float = 1.0, rotations: np.ndarray | None = None
                        ) -> np.ndarray:
         """Nitsche right-hand side [E, 3, n] for the prescribed values g (times value_scale):
-        -int (Pi g) . sigma(v) n + eta_b int (mu (Pi g . v + (Pi g . n) (v . n)) + lam P(Pi g . n) P(v . n)), P the
-        projection onto degree k - 1 (``kernels.nitsche_blocks``). Warped (rotations [E, 3, 3]):
+        -int (Pi g) . sigma(v) n + eta_b int (mu (Pi g . v + (Pi g . n) (v . n)) + s lam P(Pi g . n) P(v . n)), P the
+        projection onto degree k - 1 (``kernels.nitsche_blocks``), s the volumetric penalty's share
+        eta_volumetric / eta. Warped (rotations [E, 3, 3]):
         the consistency part sees g in the element's frame, R^T (x + g) - x, and its force is rotated back."""
         el, basis, n = self.elements, self.basis, self.n
         out = np.zeros((el.count, 3, n))
@@ -97,7 +98,7 @@ class BoundaryTerms:
         out += basis.tested(el.count, sp_.element, xi, w[:, None] * pen)
         # the volumetric part penalises only the normal jump's projection onto degree k - 1 (kernels.nitsche_blocks)
         out += projected_load(basis, self.patch_low, self.patch_owner, P["mask"], xi, patch,
-                              lam * eta_b[patch] * w * gn, el.count)
+                              lam * self.eta_volumetric / self.eta * eta_b[patch] * w * gn, el.count)
         if self.flux != "ip":
             return out
         # g . sigma(psi_I e_p) n = sum_a V_pa d_a psi_I, V_pa = mu (g_p n_a + n_p g_a) + lam (g . n) delta_pa
