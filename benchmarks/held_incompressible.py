@@ -4,10 +4,12 @@ cells' finite-volume divergence (engine/staggered/held.py), DG k = 2 beside.
     .venv/bin/python -m benchmarks.held_incompressible sphere --nu 0.3 0.49 0.4999 --h 0.1 0.05 0.025
     .venv/bin/python -m benchmarks.held_incompressible annulus --nu 0.3 0.4999 --h 0.05 0.025 0.0125
     .venv/bin/python -m benchmarks.held_incompressible rim --nu 0.3 0.4999 --h 0.1 0.05 0.025 --reference 0.016667
+    .venv/bin/python -m benchmarks.held_incompressible pressure --nu 0.3 0.4999 --h 0.1 0.05 --dg 0.25 0.125
 
 ``sphere``/``annulus``: relative L2 error against the exact solution (verification/held.py); ``rim``:
 the sphere clamped below z = 0.3 (no closed form), against the staggered method at cell size
-``--reference`` (``--reference-dg``: DG k = 2 there instead). Each staggered row
+``--reference`` (``--reference-dg``: DG k = 2 there instead); ``pressure``: the clamped sphere's pressure
+against its exact constant (relative L2 at the probes, largest relative error over the cells). Each staggered row
 runs twice: "finite volume" (the engine) and "Nitsche only" (APERTURE_RATIO raised past the job's
 lambda / mu). ``--dg`` adds DG k = 2 rows at the sizes given there.
 """
@@ -32,7 +34,7 @@ def _staggered(run, finite_volume: bool):
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("case", choices=["sphere", "annulus", "rim"])
+    parser.add_argument("case", choices=["sphere", "annulus", "rim", "pressure"])
     parser.add_argument("--nu", type=float, nargs="+", default=[0.3, 0.4999])
     parser.add_argument("--h", type=float, nargs="+", default=[0.1, 0.05])
     parser.add_argument("--dg", type=float, nargs="*", default=[], help="DG k = 2 cell sizes (sphere, rim)")
@@ -40,6 +42,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--reference-dg", action="store_true", help="rim: DG k = 2 as the reference")
     args = parser.parse_args(argv)
     dg = {"kind": "dg", "degree": 2}
+    if args.case == "pressure":
+        for nu in args.nu:
+            for label, method, sizes in (("staggered", None, args.h), ("DG k = 2", dg, args.dg)):
+                for h in sizes:
+                    t = time.perf_counter()
+                    probes, cells = cases.clamped_sphere_pressure_error(nu, h, method)
+                    print(f"pressure nu={nu:g} {label} h={h:g}: probes {probes:.3e}, cells at most {cells:.3e} "
+                          f"({time.perf_counter() - t:.1f} s)", flush=True)
+        return
     for nu in args.nu:
         reference = None
         if args.case == "rim":

@@ -47,13 +47,15 @@ class State:
     """One solve's result: the method's unknowns ``u`` (its own layout: staggered [d, size] face
     samples, DG [E, d, n] coefficients), the solve's statistics and wall time [s]; ``rotations``
     [E, 3, 3] of corotated elements where the method warps its stiffness (else None);
-    ``load_scale``: the factor the surface loads had (the tractions the surface stress carries)."""
+    ``load_scale``: the factor the surface loads had (the tractions the surface stress carries);
+    ``value_scale``: the prescribed values' (what a held cell's flux through its wall was)."""
 
     u: np.ndarray
     stats: SolveStats
     seconds: float
     rotations: np.ndarray | None = None
     load_scale: float = 1.0
+    value_scale: float = 1.0
 
 
 class Method(Protocol):

@@ -61,6 +61,19 @@ def clamped_sphere_error(nu: float, h: float, method: dict | None = None) -> tup
     return _error(result.fields.probes["displacement"], exact), result.solver.warnings
 
 
+def clamped_sphere_pressure_error(nu: float, h: float, method: dict | None = None) -> tuple[float, float]:
+    """The pressure of :func:`clamped_sphere_error`'s sphere against its exact one, the constant
+    p = (3 lambda + 2 mu) B [Pa] (tr(eps) = 3 A everywhere): the relative L2 error at the 500 probes and
+    the largest relative error over the cells that hold material."""
+    lam, mu = lame(nu)
+    B = 1.0 / ((3 * lam + 2 * mu) + 4 * mu / A_IN**3)
+    exact = (3 * lam + 2 * mu) * B
+    result = held_sphere(nu, h, method, fields=("pressure",))
+    probes, cells = result.fields.probes["pressure"], result.fields.cells["pressure"]
+    return (float(np.sqrt(np.mean((probes - exact) ** 2))) / exact,
+            float(np.nanmax(np.abs(cells - exact))) / exact)
+
+
 def clamped_annulus_error(nu: float, h: float) -> tuple[float, list[str]]:
     """The 2D (plane strain) twin of :func:`clamped_sphere_error`: the annulus a = 0.5 < r < 1 (polygons
     of 1,024 vertices), pressure 1 inside, clamped where |x| > 0.98; u_r = A r + B / r, A = -B,
@@ -89,7 +102,7 @@ def partly_clamped_sphere(nu: float, h: float, method: dict | None = None, below
 
 
 def held_sphere(nu: float, h: float, method: dict | None = None, below: float = np.inf, subdivisions: int = 5,
-                rtol: float = 1e-10):
+                rtol: float = 1e-10, fields: tuple[str, ...] = ("displacement",)):
     """The engine's result for the thick sphere of :func:`clamped_sphere_error` clamped where |x| >
     CLAMP_RADIUS and z < ``below`` [m], at cell size ``h`` [m], probes at its 500 points."""
     from engine import simulate
@@ -97,6 +110,7 @@ def held_sphere(nu: float, h: float, method: dict | None = None, below: float = 
 
     spec = _job(3, h, nu, method, sphere_probes(3, 500), {"mesh": "s.stl"})
     spec["solver"]["rtol"] = rtol
+    spec["output"]["fields"] = list(fields)
     fn = Functions(regions={"clamp": lambda p: (np.linalg.norm(p, axis=1) > CLAMP_RADIUS) & (p[:, 2] < below)})
     return simulate(spec, shell_stl(subdivisions), filename="s.stl", functions=fn)
 

@@ -468,7 +468,7 @@ class StaggeredElasticity(StaggeredFields):
         if self._removes_rigid_motion():
             u = self._without_rigid_motion(self._project(u))
         u = u * level.free
-        return State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
+        return State(u, stats, time.perf_counter() - t0, load_scale=load_scale, value_scale=value_scale)
 
     def _cg(self, inner: Callable) -> PCG:
         """CG on the operator, preconditioned by ``inner`` (then off the free rigid modes)."""

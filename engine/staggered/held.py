@@ -30,7 +30,8 @@ from scipy.spatial import cKDTree
 from ..boundary import area_vectors
 from ..geometry.apertures import cell_area_vectors, face_apertures
 from ..geometry.surface import Surface
-from .nitsche import TAU, HoldPatches, HoldQuadrature, SurfaceOperator, _cell_fraction, cell_fill, combined, make_surface_operator
+from .nitsche import (TAU, HeldDivergence, HoldPatches, HoldQuadrature, SurfaceOperator, _cell_fraction, cell_fill, combined,
+                      make_surface_operator)
 from .operator import Level
 from .sampling import _unique_rows
 
@@ -76,11 +77,12 @@ def surface_operator(level: Level, quad: HoldQuadrature, patches: HoldPatches, l
     parts = [make_surface_operator(level, quad.subset(in_group), 0.0)] if in_group.any() else []
     if not in_group.all():
         parts.append(make_surface_operator(level, quad.subset(~in_group), lam, exclude=member_pos))
-    extra = None
+    extra = divergence = None
     if len(groups.members):
-        extra = _finite_volume(level, groups, _prescribed_flux(level, quad, in_group, groups))
+        extra, divergence = _finite_volume(level, groups, _prescribed_flux(level, quad, in_group, groups))
     operator = combined(parts, level.size, extra)
     operator.kept = kept
+    operator.divergence = divergence
     return operator
 
 
@@ -270,10 +272,11 @@ def _prescribed_flux(level: Level, quad: HoldQuadrature, in_group: np.ndarray, g
     return flux + np.einsum("gi,gi->g", mean_g, exact - area)
 
 
-def _finite_volume(level: Level, groups: Groups, flux_g: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
-    """(sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]): the
-    groups' finite-volume divergence D_S in place of their members' lambda / 2 V_c tr(eps_c)^2 (T:
-    the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
+def _finite_volume(level: Level, groups: Groups, flux_g: np.ndarray
+                   ) -> tuple[tuple[np.ndarray, sp.csr_matrix, np.ndarray], HeldDivergence]:
+    """((sample keys [k], lambda (D^T V^-1 D - T^T diag(V_c) T) [k, k], -lambda D^T V^-1 G [k]), the
+    divergence itself): the groups' finite-volume divergence D_S in place of their members' lambda / 2
+    V_c tr(eps_c)^2 (T: the members' tr(eps) [1 / m]), with the prescribed flux G_S (its load)."""
     d, h, lay, size = level.dim, level.spacing, level.layout, level.size
     members, group = groups.members, groups.group
     eye = np.eye(d, dtype=np.int64)
@@ -296,4 +299,5 @@ def _finite_volume(level: Level, groups: Groups, flux_g: np.ndarray) -> tuple[np
     vs = np.bincount(group, weights=volume, minlength=n_groups)
     lam = level.lam
     matrix = lam * (D.T @ sp.diags(1.0 / vs) @ D - T.T @ sp.diags(volume) @ T)
-    return every, sp.csr_matrix(matrix), -lam * (D.T @ (flux_g / vs))
+    return ((every, sp.csr_matrix(matrix), -lam * (D.T @ (flux_g / vs))),
+            HeldDivergence(every, D, np.asarray(flux_g, dtype=float), vs, members, group))

@@ -104,6 +104,28 @@ def hold_patches(prescribed: list[Prescribed], surface: Surface) -> HoldPatches 
     return HoldPatches(tuple(prescribed), pieces, surface)
 
 
+@dataclass(frozen=True)
+class HeldDivergence:
+    """The held cut cells' finite-volume divergence (``held``): what their volumetric energy reads in
+    place of tr(eps), so what their pressure is. ``keys`` [k] (a * size + position of the samples it
+    reads), ``matrix`` [groups, k] [m^(d-1)] (D_S), ``flux`` [groups] [m^d] (G_S, the prescribed
+    values' at scale 1), ``volume`` [groups] [m^d]; ``members`` [M, d] the cells, ``group`` [M] each
+    one's group. A group's mean tr(eps) is (D_S u + s G_S) / V_S, s the prescribed values' scale."""
+
+    keys: np.ndarray
+    matrix: sp.csr_matrix
+    flux: np.ndarray
+    volume: np.ndarray
+    members: np.ndarray
+    group: np.ndarray
+
+    def trace(self, u: np.ndarray, value_scale: float = 1.0) -> np.ndarray:
+        """Each member's tr(eps) [M] [-] from the samples u [d, size]."""
+        size = u.shape[1]
+        values = u[self.keys // size, self.keys % size]
+        return ((self.matrix @ values + value_scale * self.flux) / self.volume)[self.group]
+
+
 @dataclass
 class SurfaceOperator:
     """The Nitsche terms on one level: S = mass - flux stress - (flux stress)^T over the DOFs
@@ -121,6 +143,8 @@ class SurfaceOperator:
     kept: np.ndarray | None = None
     # the part of ``mass`` that is bulk energy, not a hold (``flat_layers``): it holds no rigid mode
     bulk: sp.csr_matrix | None = None
+    # the held cut cells' divergence (``held``), whose cells' pressure it is; None: no such cells
+    divergence: HeldDivergence | None = None
 
     @property
     def hold_mass(self) -> sp.csr_matrix:
@@ -165,6 +189,7 @@ def with_bulk(operator: SurfaceOperator | None, extra: tuple[np.ndarray, sp.spma
     to its mass and remembered as its ``bulk``."""
     merged = combined([] if operator is None else [operator], size, extra)
     merged.kept = None if operator is None else operator.kept
+    merged.divergence = None if operator is None else operator.divergence
     every = merged.comp.astype(np.int64) * size + merged.pos
     keys, matrix = extra[0], extra[1]
     m = sp.csr_matrix((np.ones(len(keys)), (np.searchsorted(every, keys), np.arange(len(keys)))), (len(every), len(keys)))
