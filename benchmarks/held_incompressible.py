@@ -9,7 +9,9 @@ cells' finite-volume divergence (engine/staggered/held.py), DG k = 2 beside.
 ``sphere``/``annulus``: relative L2 error against the exact solution (verification/held.py); ``rim``:
 the sphere clamped below z = 0.3 (no closed form), against the staggered method at cell size
 ``--reference`` (``--reference-dg``: DG k = 2 there instead); ``pressure``: the clamped sphere's pressure
-against its exact constant (relative L2 at the probes, largest relative error over the cells). Each staggered row
+against its exact constant (relative L2 at the probes, largest relative error over the cells) and, for
+the staggered method, the pressure's spikes where the sphere is clamped below z = 0.3
+(``verification.held.rim_pressure_spikes``). Each staggered row
 runs twice: "finite volume" (the engine) and "Nitsche only" (APERTURE_RATIO raised past the job's
 lambda / mu). ``--dg`` adds DG k = 2 rows at the sizes given there.
 """
@@ -48,8 +50,9 @@ def main(argv: list[str] | None = None) -> None:
                 for h in sizes:
                     t = time.perf_counter()
                     probes, cells = cases.clamped_sphere_pressure_error(nu, h, method)
-                    print(f"pressure nu={nu:g} {label} h={h:g}: probes {probes:.3e}, cells at most {cells:.3e} "
-                          f"({time.perf_counter() - t:.1f} s)", flush=True)
+                    spikes = cases.rim_pressure_spikes(nu, h, method) if method is None else float("nan")
+                    print(f"pressure nu={nu:g} {label} h={h:g}: probes {probes:.3e}, cells at most {cells:.3e}; "
+                          f"clamped below z = 0.3: spikes {spikes:.3g} ({time.perf_counter() - t:.1f} s)", flush=True)
         return
     for nu in args.nu:
         reference = None

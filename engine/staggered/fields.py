@@ -130,6 +130,7 @@ class StaggeredFields(SurfaceStress):
             unheld |= den == 0
         order = [(1, 2), (0, 2), (0, 1)] if d == 3 else [(0, 1)]
         strain = np.where(self._solid()[..., None], np.stack(normal + [shear[p] for p in order], axis=-1), np.nan)
+        self._held_trace(strain, u, value_scale)  # before the cut cells' fit, which reads these cells too
         # a cut cell's own strain reads samples outside the solid that only its sliver of energy
         # determines: its value is the fit of its neighbourhood, weighted to the material. A sliver
         # none of whose edges of a pair holds material has that shear from faces that are no
@@ -143,17 +144,24 @@ class StaggeredFields(SurfaceStress):
             fitted = fit_strain(self.grid, data, trust, centres)
             found = np.isfinite(fitted).all(axis=1)  # else (nothing fit within reach) the cell's own
             strain[tuple(cut_cells[found].T)] = fitted[found]
-        held = self.surface_terms.divergence if self.surface_terms is not None else None
-        if held is not None:
-            # near nu = 1/2 a held cell's energy reads its finite-volume divergence, with the wall's flux
-            # prescribed, not the faces' tr(eps): its wall sample is held by mu alone, and lambda times that
-            # slack made its pressure noise (a bonded block at nu 0.4999, h = 1/8: 2.2 Pa in a rim cell
-            # beside cells of 0.06 Pa; the clamped sphere's cells up to 57% off, 0.07% now)
-            inside = np.all(held.members < np.asarray(shape), axis=1) & np.all(held.members >= 0, axis=1)
-            cells = tuple(held.members[inside].T)
-            shift = (held.trace(u, value_scale)[inside] - strain[cells][:, :d].sum(axis=1)) / d
-            strain[cells + (slice(0, d),)] += shift[:, None]
+            self._held_trace(strain, u, value_scale)  # the held ones among them keep their own
         return strain
+
+    def _held_trace(self, strain: np.ndarray, u: np.ndarray, value_scale: float) -> None:
+        """Set the trace of the held cut cells' strains [*shape, 6 | 3] (in place) to their finite-volume
+        divergence, keeping their deviatoric parts. Near nu = 1/2 their energy reads that divergence,
+        the wall's flux prescribed, not their faces' tr(eps), whose wall sample only mu holds: lambda
+        times that slack was pressure noise (a bonded block at nu 0.4999, h = 1/8: 2.2 Pa in a rim cell
+        beside cells of 0.06 Pa; the clamped sphere's cells up to 57% off, 0.07% now), and the cut
+        cells' fits around them read it (a sliver at a clamp's rim 1,400 Pa where the field is 0.2)."""
+        held = self.surface_terms.divergence if self.surface_terms is not None else None
+        if held is None:
+            return
+        d = self.dim
+        inside = np.all((held.members >= 0) & (held.members < np.asarray(self.grid.shape)), axis=1)
+        cells = tuple(held.members[inside].T)
+        shift = (held.trace(u, value_scale)[inside] - strain[cells][:, :d].sum(axis=1)) / d
+        strain[cells + (slice(0, d),)] += shift[:, None]
 
 
 def _shifted(a: np.ndarray, offset, shape) -> np.ndarray:
