@@ -80,7 +80,8 @@ def face_blocks(el: Elements, basis: Basis, mu: float, lam: float, eta: float, w
     consistency with the minus side's stress, with the plus side's): (1, 1, 1) is IP, (1, 0, 0) BZ.
     ``rest``: the penalty's weight on the part of the jump with zero mean over the face (its mean has
     weight 1). ``volumetric``: the volumetric penalty's eta over ``eta`` (its own coercivity threshold,
-    DGElasticity._raise_penalty). Computed FACE_CHUNK faces at a time: the face integrals take half a block's memory each."""
+    DGElasticity._raise_penalty). Computed FACE_CHUNK faces at a time: the face integrals take half a
+    block's memory each."""
     s = 3 * basis.size
     penalty = face_penalty(el, eta)
     ref = el.reference_faces

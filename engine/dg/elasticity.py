@@ -6,9 +6,10 @@ element / interface / Nitsche blocks, loads, the rigid modes left free; then an 
 (``engine.analysis``) calls ``solve`` as often as it needs and ``fields`` per state. The system
 is factorised once per (penalty, time step, rotations) by a sparse Cholesky; an IP matrix that
 is not positive definite raises the penalty and is refactorised (section 9.1; near incompressibility
-the volumetric terms' penalty first, ``_raise_penalty``), a doubled penalty being reported. Mass: the bases are orthonormal, so M = rho h^3 I and backward Euler only shifts
-the diagonal. ``material.model = "corotated"`` warps element and interface blocks by each
-element's rotation (section 6) and iterates the rotations to a fixed point per solve.
+the volumetric terms' penalty first, ``_raise_penalty``), a doubled penalty being reported. Mass:
+the bases are orthonormal, so M = rho h^3 I and backward Euler only shifts the diagonal.
+``material.model = "corotated"`` warps element and interface blocks by each element's rotation
+(section 6) and iterates the rotations to a fixed point per solve.
 """
 
 from __future__ import annotations
@@ -56,13 +57,13 @@ JUMP_REST = {1: 0.1, 2: 1.0}
 MAX_DOUBLINGS = 12  # eta * 4096 without a positive definite matrix means something else is wrong
 # The volumetric terms lam ((div u, div v) - consistency + eta Pi[u]_n Pi[v]_n) are a form of their own, positive
 # semi-definite once their eta passes a trace constant, and so are the shear terms with theirs. Near
-# incompressibility the volumetric form, lam / mu times the other, is the one that fails (the thick sphere at
-# nu 0.4999: between 5.5 and 6.05 at h = 1/6, while the shear form holds at 5), and raising the shear penalty
-# with it only stiffens the method: the sphere's error at nu 0.4999 over nu 0.3's was 2.69x / 3.54x at
-# h = 1/8 / 1/6 with both doubled to 10, 1.80x / 2.45x with the volumetric one alone at 6.25 (docs/benchmarks.md,
-# "DG near incompressibility"). So above INCOMPRESSIBLE_RATIO the volumetric penalty rises alone, by
-# VOLUMETRIC_STEP (a smaller step lands nearer the threshold at the price of more failed factorisations),
-# until it is VOLUMETRIC_AHEAD times the shear one; then both double.
+# incompressibility the volumetric form, lam / mu times the other, is the one that fails (the thick sphere at nu
+# 0.4999: between 5.5 and 6.05 at h = 1/6, while the shear form holds at 5), and raising the shear penalty with it
+# only stiffens the method: the sphere's error at nu 0.4999 over nu 0.3's was 2.69x / 3.54x at h = 1/8 / 1/6 with
+# both doubled to 10, 1.80x / 2.45x with the volumetric one alone at 6.25 (docs/benchmarks.md, "DG near
+# incompressibility"). So above INCOMPRESSIBLE_RATIO the volumetric penalty rises alone, by VOLUMETRIC_STEP (a
+# smaller step lands nearer the threshold at the price of more failed factorisations), until it is
+# VOLUMETRIC_AHEAD times the shear one; then both double.
 VOLUMETRIC_AHEAD = 2.0
 VOLUMETRIC_STEP = 1.25
 
