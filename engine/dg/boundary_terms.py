@@ -13,7 +13,7 @@ import numpy as np
 from ..boundary import evaluate, select_patch
 from ..errors import BoundaryError
 from ..solvers.rigid import BALANCE_TOLERANCE, PIN_TOLERANCE, UnbalancedLoadError, rigid_motions, torque_vector
-from .integrals import projected_load, surface_points
+from .integrals import SurfacePoints, projected_load, surface_points
 
 
 class BoundaryTerms:
@@ -64,6 +64,23 @@ class BoundaryTerms:
     def _xi(self, element: np.ndarray, points: np.ndarray) -> np.ndarray:
         return (np.asarray(points) - self.elements.centres[element]) / self.basis.h
 
+    def patch_points(self) -> SurfacePoints:
+        """The displacement patches' quadrature points (exact to degree 2 k + 2)."""
+        P = self.patches
+        return surface_points(P["triangles"], P["element"], 2 * self.degree + 2)
+
+    def prescribed_at(self, points: SurfacePoints, value_scale: float = 1.0) -> np.ndarray:
+        """The prescribed values g [Q, 3] [m] at the patches' ``points``, times ``value_scale``, zero in
+        the components their boundary leaves free."""
+        P = self.patches
+        g = np.zeros((len(points.points), 3))
+        for k, bc in enumerate(self.prescribed):
+            on = P["boundary"][points.triangle] == k
+            if not np.any(on):
+                continue
+            g[on] = bc.values(points.points[on])  # shape and finiteness checked, naming the boundary
+        return value_scale * g * P["mask"][P["patch"][points.triangle]]
+
     def _dirichlet_rhs(self, eta_b: np.ndarray, value_scale: float = 1.0, rotations: np.ndarray | None = None
                        ) -> np.ndarray:
         """Nitsche right-hand side [E, 3, n] for the prescribed values g (times value_scale):
@@ -76,16 +93,10 @@ class BoundaryTerms:
         P = self.patches
         if P["count"] == 0:
             return out
-        sp_ = surface_points(P["triangles"], P["element"], 2 * self.degree + 2)
+        sp_ = self.patch_points()
         patch = P["patch"][sp_.triangle]
         mask = P["mask"][patch]
-        g = np.zeros((len(sp_.points), 3))
-        for k, bc in enumerate(self.prescribed):
-            on = P["boundary"][sp_.triangle] == k
-            if not np.any(on):
-                continue
-            g[on] = bc.values(sp_.points[on])  # shape and finiteness checked, naming the boundary
-        g = value_scale * g * mask
+        g = self.prescribed_at(sp_, value_scale)
         gc = g
         if rotations is not None:
             x = sp_.points

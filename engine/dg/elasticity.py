@@ -327,7 +327,7 @@ class DGElasticity(BoundaryTerms, Fields):
             state.load_scale = load_scale  # the surface stress carries this share of the loads
         else:
             u, stats = self._linear_solve(load_scale, value_scale, inertia, on_iteration, x0)
-            state = State(u, stats, time.perf_counter() - t0, load_scale=load_scale)
+            state = State(u, stats, time.perf_counter() - t0, load_scale=load_scale, value_scale=value_scale)
         self.warnings.extend(w for w in state.stats.warnings if w not in self.warnings)
         return state
 

@@ -19,6 +19,7 @@ from ..method import State
 from ..output import FieldData
 from ..surface_stress import SurfaceStress
 from .embedding import SurfaceEmbedding
+from .lifting import lifted_jumps
 from .location import locate, owners
 from .recovery import PatchFit, strain_polynomials
 
@@ -82,7 +83,8 @@ class Fields(SurfaceStress):
             out[idx] = values
             return out
 
-        strain = self.recovered_strain(u, state.rotations) if any(n in names for n in STRESS_FIELDS) else None
+        strain = (self.recovered_strain(u, state.rotations, state.value_scale)
+                  if any(n in names for n in STRESS_FIELDS) else None)
         fit = self.patch_fit() if strain is not None else None
         if "displacement" in names:
             data.cells["displacement"] = dense(self.evaluate(u, element, centres))
@@ -117,10 +119,19 @@ class Fields(SurfaceStress):
                 data.surface.update(self.surface_stress(raw, names, state.load_scale))
         return data
 
-    def recovered_strain(self, u: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
+    def recovered_strain(self, u: np.ndarray, rotations: np.ndarray | None = None, value_scale: float = 1.0
+                         ) -> np.ndarray:
         """The patch-fitted Voigt strain of coefficients u [E, 3, n] as monomial coefficients
-        [E, 6, n'] in the element frames (``recovery``; corotated with rotations [E, 3, 3])."""
-        return self.patch_fit().fit(strain_polynomials(u, self.basis, rotations))
+        [E, 6, n'] in the element frames (``recovery``; corotated with rotations [E, 3, 3]). Its trace
+        is the lifted divergence (``lifting``; ``value_scale``: the prescribed values'), which the
+        volumetric energy holds, where the model does not warp."""
+        strain = strain_polynomials(u, self.basis, rotations)
+        if rotations is None:
+            points = self.patch_points() if self.patches["count"] else None
+            held = self.prescribed_at(points, value_scale) if points is not None else None
+            r = lifted_jumps(self.elements, self.basis, u, self.patches, points, held)
+            strain[:, :3] -= np.einsum("ei,eis->es", r, self.basis.T)[:, None, :] / 3.0
+        return self.patch_fit().fit(strain)
 
     def patch_fit(self) -> PatchFit:
         """The strain recovery of this geometry (built once)."""
