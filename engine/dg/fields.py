@@ -124,9 +124,10 @@ class Fields(SurfaceStress):
         """The patch-fitted Voigt strain of coefficients u [E, 3, n] as monomial coefficients
         [E, 6, n'] in the element frames (``recovery``; corotated with rotations [E, 3, 3]). Its trace
         is the lifted divergence (``lifting``; ``value_scale``: the prescribed values'), which the
-        volumetric energy holds, where the model does not warp."""
+        volumetric energy holds, with IP fluxes where the model does not warp (Babuska-Zlamal's form has
+        no consistency terms: its volumetric energy reads each element's div u)."""
         strain = strain_polynomials(u, self.basis, rotations)
-        if rotations is None:
+        if rotations is None and self.flux == "ip":
             points = self.patch_points() if self.patches["count"] else None
             held = self.prescribed_at(points, value_scale) if points is not None else None
             r = lifted_jumps(self.elements, self.basis, u, self.patches, points, held)
